@@ -1,0 +1,497 @@
+"""The pinhole camera with OpenCV lens distortion, and its pure projection math.
+
+Conventions (DESIGN.md): ``X_c = R X_w + t`` with ``R = R_cam_from_world``; pixel
+``(0, 0)`` is the centre of the top-left pixel; distortion coefficients in OpenCV order
+``k1 k2 p1 p2 [k3 [k4 k5 k6 [s1 s2 s3 s4 [tau_x tau_y]]]]``.
+
+The functions here are vectorised NumPy and stateless; :class:`Camera` only holds the
+parameters and calls them.
+"""
+
+from __future__ import annotations
+
+import logging
+from dataclasses import dataclass, field, replace as dc_replace
+from typing import Any
+
+import numpy as np
+
+from calibration.errors import CalibrationError
+
+__all__ = [
+    "Camera",
+    "DIST_LENGTHS",
+    "distort_normalized",
+    "undistort_normalized",
+    "rodrigues_to_matrix",
+    "matrix_to_rodrigues",
+]
+
+log = logging.getLogger(__name__)
+
+#: Lengths of a distortion vector OpenCV accepts.
+DIST_LENGTHS = (0, 4, 5, 8, 12, 14)
+#: Largest deviation of ``R Rᵀ`` from the identity accepted as a rotation.
+ORTHONORMAL_TOL = 1e-6
+
+
+# --------------------------------------------------------------------------- rotations
+def rodrigues_to_matrix(rvec: np.ndarray) -> np.ndarray:
+    """Rotation matrix of an axis-angle vector (same as ``cv2.Rodrigues``).
+
+    ``rvec`` (3,) radians → (3, 3) float64.
+    """
+    r = np.asarray(rvec, dtype=np.float64).reshape(3)
+    theta = float(np.linalg.norm(r))
+    if theta < 1e-300:
+        return np.eye(3)
+    k = r / theta
+    kx = np.array([[0.0, -k[2], k[1]], [k[2], 0.0, -k[0]], [-k[1], k[0], 0.0]])
+    return np.eye(3) + np.sin(theta) * kx + (1.0 - np.cos(theta)) * (kx @ kx)
+
+
+def matrix_to_rodrigues(R: np.ndarray) -> np.ndarray:
+    """Axis-angle vector (3,) of a rotation matrix (3, 3); stable near 0 and π."""
+    R = np.asarray(R, dtype=np.float64)
+    cos_t = np.clip((np.trace(R) - 1.0) / 2.0, -1.0, 1.0)
+    w = np.array([R[2, 1] - R[1, 2], R[0, 2] - R[2, 0], R[1, 0] - R[0, 1]]) / 2.0
+    sin_t = float(np.linalg.norm(w))
+    theta = float(np.arctan2(sin_t, cos_t))
+    if sin_t > 1e-6:
+        return w / sin_t * theta
+    if cos_t > 0:  # θ ≈ 0: R ≈ I + [w]x
+        return w
+    # θ ≈ π: axis from the largest diagonal of (R + I) / 2 = k kᵀ
+    B = (R + np.eye(3)) / 2.0
+    i = int(np.argmax(np.diag(B)))
+    k = B[:, i] / np.sqrt(B[i, i])
+    # refine the sign with the (tiny) antisymmetric part when present
+    if np.dot(k, w) < 0:
+        k = -k
+    return k * theta
+
+
+# --------------------------------------------------------------------------- distortion
+def _tilt_matrix(tau_x: float, tau_y: float) -> np.ndarray:
+    """OpenCV's ``computeTiltProjectionMatrix`` (3, 3) for a tilted sensor."""
+    cx, sx, cy, sy = np.cos(tau_x), np.sin(tau_x), np.cos(tau_y), np.sin(tau_y)
+    rot_x = np.array([[1.0, 0.0, 0.0], [0.0, cx, sx], [0.0, -sx, cx]])
+    rot_y = np.array([[cy, 0.0, -sy], [0.0, 1.0, 0.0], [sy, 0.0, cy]])
+    rot_xy = rot_y @ rot_x
+    proj_z = np.array(
+        [[rot_xy[2, 2], 0.0, -rot_xy[0, 2]], [0.0, rot_xy[2, 2], -rot_xy[1, 2]], [0.0, 0.0, 1.0]]
+    )
+    return proj_z @ rot_xy
+
+
+def _padded(dist: np.ndarray) -> np.ndarray:
+    d = np.zeros(14)
+    d[: len(dist)] = dist
+    return d
+
+
+def _radial_tangential(
+    x: np.ndarray, y: np.ndarray, d: np.ndarray, jacobian: bool = False
+) -> tuple[np.ndarray, ...]:
+    """Distortion before the sensor tilt; with ``jacobian`` also ∂(xd, yd)/∂(x, y)."""
+    k1, k2, p1, p2, k3, k4, k5, k6, s1, s2, s3, s4 = d[:12]
+    r2 = x * x + y * y
+    num = 1.0 + r2 * (k1 + r2 * (k2 + r2 * k3))
+    den = 1.0 + r2 * (k4 + r2 * (k5 + r2 * k6))
+    radial = num / den
+    xy2 = 2.0 * x * y
+    xd = x * radial + p1 * xy2 + p2 * (r2 + 2.0 * x * x) + r2 * (s1 + s2 * r2)
+    yd = y * radial + p1 * (r2 + 2.0 * y * y) + p2 * xy2 + r2 * (s3 + s4 * r2)
+    if not jacobian:
+        return xd, yd
+    dnum = k1 + r2 * (2.0 * k2 + 3.0 * k3 * r2)
+    dden = k4 + r2 * (2.0 * k5 + 3.0 * k6 * r2)
+    g = (dnum * den - num * dden) / (den * den)  # d radial / d r2
+    h1 = s1 + 2.0 * s2 * r2
+    h2 = s3 + 2.0 * s4 * r2
+    j11 = radial + 2.0 * x * x * g + 2.0 * p1 * y + 6.0 * p2 * x + 2.0 * x * h1
+    j12 = 2.0 * x * y * g + 2.0 * p1 * x + 2.0 * p2 * y + 2.0 * y * h1
+    j21 = 2.0 * x * y * g + 2.0 * p1 * x + 2.0 * p2 * y + 2.0 * x * h2
+    j22 = radial + 2.0 * y * y * g + 6.0 * p1 * y + 2.0 * p2 * x + 2.0 * y * h2
+    return xd, yd, j11, j12, j21, j22
+
+
+def _apply_h(T: np.ndarray, x: np.ndarray, y: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    u = T[0, 0] * x + T[0, 1] * y + T[0, 2]
+    v = T[1, 0] * x + T[1, 1] * y + T[1, 2]
+    w = T[2, 0] * x + T[2, 1] * y + T[2, 2]
+    w = np.where(w != 0.0, w, 1.0)
+    return u / w, v / w
+
+
+def distort_normalized(xy: np.ndarray, dist: np.ndarray) -> np.ndarray:
+    """Apply OpenCV lens distortion to normalised image coordinates.
+
+    ``xy`` (N, 2) ideal coordinates ``(X_c/Z_c, Y_c/Z_c)``; ``dist`` (n,) coefficients.
+    Returns (N, 2) distorted normalised coordinates (the model of ``cv2.projectPoints``:
+    radial rational ``(1+k1r²+k2r⁴+k3r⁶)/(1+k4r²+k5r⁴+k6r⁶)``, tangential p1 p2, thin prism
+    s1..s4, sensor tilt τx τy).
+    """
+    xy = np.asarray(xy, dtype=np.float64)
+    dist = np.asarray(dist, dtype=np.float64)
+    if dist.size == 0 or not np.any(dist):
+        return xy.copy()
+    d = _padded(dist)
+    xd, yd = _radial_tangential(xy[:, 0], xy[:, 1], d)
+    if d[12] != 0.0 or d[13] != 0.0:
+        xd, yd = _apply_h(_tilt_matrix(d[12], d[13]), xd, yd)
+    return np.stack([xd, yd], axis=1)
+
+
+def undistort_normalized(
+    xy_d: np.ndarray, dist: np.ndarray, iterations: int = 20, tol: float = 1e-12
+) -> np.ndarray:
+    """Invert :func:`distort_normalized` (N, 2) → (N, 2).
+
+    The sensor tilt (a homography) is inverted exactly; the rest by Newton's method with
+    the analytic 2×2 Jacobian, started at the distorted point and iterated only on the
+    points not yet converged (``|step| < tol``). Points where the model cannot be
+    inverted (far outside the calibrated field) return the last iterate.
+    """
+    xy_d = np.asarray(xy_d, dtype=np.float64)
+    dist = np.asarray(dist, dtype=np.float64)
+    if dist.size == 0 or not np.any(dist) or len(xy_d) == 0:
+        return xy_d.copy()
+    d = _padded(dist)
+    tx, ty = xy_d[:, 0], xy_d[:, 1]
+    if d[12] != 0.0 or d[13] != 0.0:
+        tx, ty = _apply_h(np.linalg.inv(_tilt_matrix(d[12], d[13])), tx, ty)
+    x, y = tx.copy(), ty.copy()
+    active = np.flatnonzero(np.isfinite(x) & np.isfinite(y))
+    for _ in range(iterations):
+        if active.size == 0:
+            break
+        xa, ya = x[active], y[active]
+        fx, fy, j11, j12, j21, j22 = _radial_tangential(xa, ya, d, jacobian=True)
+        rx, ry = fx - tx[active], fy - ty[active]
+        det = j11 * j22 - j12 * j21
+        ok = np.abs(det) > 1e-12
+        det = np.where(ok, det, 1.0)
+        dx = np.where(ok, (j22 * rx - j12 * ry) / det, rx)
+        dy = np.where(ok, (-j21 * rx + j11 * ry) / det, ry)
+        x[active] = xa - dx
+        y[active] = ya - dy
+        moving = (np.abs(dx) > tol) | (np.abs(dy) > tol)
+        active = active[moving & np.isfinite(dx) & np.isfinite(dy)]
+    return np.stack([x, y], axis=1)
+
+
+# --------------------------------------------------------------------------- validation
+def _as_array(value: Any, camera: str, name: str, shape: tuple[int, ...]) -> np.ndarray:
+    try:
+        arr = np.array(value, dtype=np.float64)
+    except (TypeError, ValueError) as exc:
+        raise CalibrationError(f"not numeric ({exc})", camera=camera, field=name) from None
+    if arr.shape != shape:
+        if arr.size == int(np.prod(shape)) and name in ("t", "dist"):
+            arr = arr.reshape(shape)  # (3,1) column vectors and (1,n) rows are common
+        else:
+            raise CalibrationError(
+                f"expected shape {shape}, got {arr.shape}", camera=camera, field=name
+            )
+    if not np.all(np.isfinite(arr)):
+        raise CalibrationError("contains NaN or infinite values", camera=camera, field=name)
+    arr.setflags(write=False)
+    return arr
+
+
+def _check_points(X: Any, dim: int, what: str) -> tuple[np.ndarray, bool]:
+    arr = np.asarray(X, dtype=np.float64)
+    single = arr.ndim == 1
+    if single:
+        arr = arr[None, :]
+    if arr.ndim != 2 or arr.shape[1] != dim:
+        raise ValueError(f"{what}: expected shape (N, {dim}) or ({dim},), got {np.shape(X)}")
+    return arr, single
+
+
+# --------------------------------------------------------------------------- Camera
+@dataclass(frozen=True, eq=False)
+class Camera:
+    """A calibrated camera: OpenCV pinhole + distortion, world → camera pose.
+
+    Attributes
+    ----------
+    name : camera name (non-empty).
+    K : (3, 3) float64 intrinsic matrix ``[[fx, s, cx], [0, fy, cy], [0, 0, 1]]``.
+        (OpenCV's own ``projectPoints`` ignores the skew ``s``; keep it 0 for exchange.)
+    dist : (n,) float64, n in ``DIST_LENGTHS``; OpenCV order.
+    R : (3, 3) ``R_cam_from_world``, orthonormal with det +1.
+    t : (3,) so that ``X_c = R X_w + t`` (metres).
+    size : (width, height) in pixels.
+
+    Arrays are stored read-only; use :meth:`replace` to derive a changed camera.
+    Equality is identity; compare with :meth:`allclose`.
+    """
+
+    name: str
+    K: np.ndarray
+    dist: np.ndarray
+    R: np.ndarray
+    t: np.ndarray
+    size: tuple[int, int]
+    _cache: dict = field(default_factory=dict, init=False, repr=False, compare=False)
+
+    def __post_init__(self) -> None:
+        name = self.name
+        if not isinstance(name, str) or not name:
+            raise CalibrationError(f"expected a non-empty string, got {name!r}", field="name")
+        K = _as_array(self.K, name, "K", (3, 3))
+        if K[1, 0] != 0 or K[2, 0] != 0 or K[2, 1] != 0 or K[2, 2] != 1:
+            raise CalibrationError(
+                f"expected [[fx, s, cx], [0, fy, cy], [0, 0, 1]], got {K.tolist()}",
+                camera=name,
+                field="K",
+            )
+        if K[0, 0] <= 0 or K[1, 1] <= 0:
+            raise CalibrationError(
+                f"focal lengths must be positive, got fx={K[0, 0]}, fy={K[1, 1]}",
+                camera=name,
+                field="K",
+            )
+        try:
+            d = np.array(self.dist, dtype=np.float64).reshape(-1)
+        except (TypeError, ValueError) as exc:
+            raise CalibrationError(f"not numeric ({exc})", camera=name, field="dist") from None
+        if d.size not in DIST_LENGTHS:
+            raise CalibrationError(
+                f"expected {DIST_LENGTHS} coefficients, got {d.size}", camera=name, field="dist"
+            )
+        dist = _as_array(d, name, "dist", (d.size,))
+        R = _as_array(self.R, name, "R", (3, 3))
+        err = float(np.max(np.abs(R @ R.T - np.eye(3))))
+        if err > ORTHONORMAL_TOL:
+            raise CalibrationError(
+                f"not orthonormal (max |R Rᵀ - I| = {err:.3g} > {ORTHONORMAL_TOL})",
+                camera=name,
+                field="R",
+            )
+        if np.linalg.det(R) < 0:
+            raise CalibrationError(
+                "determinant is -1 (a reflection, not a rotation)", camera=name, field="R"
+            )
+        t = _as_array(self.t, name, "t", (3,))
+        try:
+            w, h = (int(v) for v in self.size)
+            exact = all(float(v) == int(v) for v in self.size)
+        except (TypeError, ValueError):
+            raise CalibrationError(
+                f"expected (width, height), got {self.size!r}", camera=name, field="size"
+            ) from None
+        if not exact or w <= 0 or h <= 0:
+            raise CalibrationError(
+                f"expected two positive integers (width, height), got {self.size!r}",
+                camera=name,
+                field="size",
+            )
+        for key, value in (("K", K), ("dist", dist), ("R", R), ("t", t), ("size", (w, h))):
+            object.__setattr__(self, key, value)
+
+    # ------------------------------------------------------------------ properties
+    @property
+    def width(self) -> int:
+        return self.size[0]
+
+    @property
+    def height(self) -> int:
+        return self.size[1]
+
+    @property
+    def center(self) -> np.ndarray:
+        """(3,) camera centre in world coordinates, ``-Rᵀ t``."""
+        return -self.R.T @ self.t
+
+    @property
+    def P(self) -> np.ndarray:
+        """(3, 4) projection matrix ``K [R | t]`` (ideal, undistorted pixels)."""
+        return self.K @ np.hstack([self.R, self.t[:, None]])
+
+    @property
+    def has_distortion(self) -> bool:
+        return bool(np.any(self.dist != 0))
+
+    # ------------------------------------------------------------------ projection
+    def to_camera(self, X: np.ndarray) -> np.ndarray:
+        """World points (N, 3) or (3,) → camera coordinates (N, 3)."""
+        X, _ = _check_points(X, 3, "X")
+        return X @ self.R.T + self.t
+
+    def _normalized_to_pixels(self, xy: np.ndarray) -> np.ndarray:
+        K = self.K
+        u = K[0, 0] * xy[:, 0] + K[0, 1] * xy[:, 1] + K[0, 2]
+        v = K[1, 1] * xy[:, 1] + K[1, 2]
+        return np.stack([u, v], axis=1)
+
+    def _pixels_to_normalized(self, uv: np.ndarray) -> np.ndarray:
+        K = self.K
+        y = (uv[:, 1] - K[1, 2]) / K[1, 1]
+        x = (uv[:, 0] - K[0, 2] - K[0, 1] * y) / K[0, 0]
+        return np.stack([x, y], axis=1)
+
+    def project_points(
+        self, X: np.ndarray, distort: bool = True
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Project world points; flag those behind the camera.
+
+        Returns ``uv`` (N, 2) pixels (NaN where the point is not in front), ``depth``
+        (N,) camera-frame z, and ``in_front`` (N,) bool (``depth > 0``).
+        """
+        Xc = self.to_camera(X)
+        z = Xc[:, 2]
+        in_front = z > 0
+        with np.errstate(divide="ignore", invalid="ignore"):
+            xy = Xc[:, :2] / z[:, None]
+        xy[~in_front] = np.nan
+        if distort and self.has_distortion:
+            xy = distort_normalized(xy, self.dist)
+        return self._normalized_to_pixels(xy), z, in_front
+
+    def project(self, X: np.ndarray, distort: bool = True) -> np.ndarray:
+        """World points (N, 3) or (3,) → pixels (N, 2); NaN for points behind the camera."""
+        return self.project_points(X, distort)[0]
+
+    def undistort_pixels(self, uv: np.ndarray) -> np.ndarray:
+        """Remove lens distortion: observed pixels (N, 2) → ideal pinhole pixels, same K."""
+        uv, _ = _check_points(uv, 2, "uv")
+        if not self.has_distortion:
+            return uv.copy()
+        xy = undistort_normalized(self._pixels_to_normalized(uv), self.dist)
+        return self._normalized_to_pixels(xy)
+
+    def distort_pixels(self, uv_ideal: np.ndarray) -> np.ndarray:
+        """Add lens distortion: ideal pinhole pixels (N, 2) → observed pixels (N, 2)."""
+        uv, _ = _check_points(uv_ideal, 2, "uv_ideal")
+        if not self.has_distortion:
+            return uv.copy()
+        xy = distort_normalized(self._pixels_to_normalized(uv), self.dist)
+        return self._normalized_to_pixels(xy)
+
+    def pixel_rays(
+        self, uv: np.ndarray, distorted: bool = True
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """Back-project pixels (N, 2) to world rays.
+
+        ``distorted`` says whether ``uv`` are observed (lens-distorted) pixels or ideal ones.
+        Returns origins (N, 3) (the camera centre) and unit directions (N, 3) in world
+        coordinates; ``project(o + s d)`` gives back ``uv`` for every ``s > 0``.
+        """
+        uv, _ = _check_points(uv, 2, "uv")
+        xy = self._pixels_to_normalized(uv)
+        if distorted and self.has_distortion:
+            xy = undistort_normalized(xy, self.dist)
+        d_cam = np.hstack([xy, np.ones((len(xy), 1))])
+        d = d_cam @ self.R  # Rᵀ d_cam for each row
+        d /= np.linalg.norm(d, axis=1, keepdims=True)
+        return np.broadcast_to(self.center, d.shape).copy(), d
+
+    def in_image(self, uv: np.ndarray) -> np.ndarray:
+        """(N,) bool: pixel inside ``[-0.5, w-0.5) × [-0.5, h-0.5)`` (NaN → False)."""
+        uv, _ = _check_points(uv, 2, "uv")
+        with np.errstate(invalid="ignore"):
+            return (
+                (uv[:, 0] >= -0.5)
+                & (uv[:, 0] < self.width - 0.5)
+                & (uv[:, 1] >= -0.5)
+                & (uv[:, 1] < self.height - 0.5)
+            )
+
+    # ------------------------------------------------------------------ images
+    def undistort_maps(self) -> tuple[np.ndarray, np.ndarray]:
+        """(H, W) float32 maps for ``cv2.remap`` giving the undistorted image (same K)."""
+        maps = self._cache.get("undistort_maps")
+        if maps is None:
+            import cv2
+
+            maps = cv2.initUndistortRectifyMap(
+                self.K, self.dist, None, self.K, self.size, cv2.CV_32FC1
+            )
+            self._cache["undistort_maps"] = maps
+        return maps
+
+    def undistort_image(self, image: np.ndarray, interpolation: int | None = None) -> np.ndarray:
+        """The image as an ideal pinhole camera with the same K would see it.
+
+        ``image`` (H, W[, C]) with (W, H) = ``size``; bool masks come back bool (nearest).
+        """
+        import cv2
+
+        image = np.asarray(image)
+        if image.shape[:2] != (self.height, self.width):
+            raise ValueError(
+                f"camera {self.name!r}: image is {image.shape[1]}x{image.shape[0]}, "
+                f"calibration says {self.width}x{self.height}"
+            )
+        if not self.has_distortion:
+            return image.copy()
+        is_bool = image.dtype == bool
+        src = image.astype(np.uint8) if is_bool else image
+        if interpolation is None:
+            interpolation = cv2.INTER_NEAREST if is_bool else cv2.INTER_LINEAR
+        mx, my = self.undistort_maps()
+        out = cv2.remap(src, mx, my, interpolation, borderMode=cv2.BORDER_CONSTANT)
+        return out.astype(bool) if is_bool else out
+
+    # ------------------------------------------------------------------ misc
+    def replace(self, **changes: Any) -> Camera:
+        """A new camera with some fields changed (validated again)."""
+        return dc_replace(self, **changes)
+
+    def allclose(self, other: Camera, atol: float = 1e-9) -> bool:
+        """True when every parameter agrees to ``atol`` (distortion padded with zeros)."""
+        n = max(self.dist.size, other.dist.size)
+        da, db = np.zeros(n), np.zeros(n)
+        da[: self.dist.size] = self.dist
+        db[: other.dist.size] = other.dist
+        return (
+            self.name == other.name
+            and tuple(self.size) == tuple(other.size)
+            and np.allclose(self.K, other.K, rtol=0, atol=atol)
+            and np.allclose(da, db, rtol=0, atol=atol)
+            and np.allclose(self.R, other.R, rtol=0, atol=atol)
+            and np.allclose(self.t, other.t, rtol=0, atol=atol)
+        )
+
+    def to_dict(self) -> dict:
+        """Plain JSON-able dict ``{K, dist, R, t, size}`` (the native file's per-camera entry)."""
+        return {
+            "K": self.K.tolist(),
+            "dist": self.dist.tolist(),
+            "R": self.R.tolist(),
+            "t": self.t.tolist(),
+            "size": list(self.size),
+        }
+
+    @classmethod
+    def from_dict(cls, name: str, data: dict) -> Camera:
+        """Inverse of :meth:`to_dict`; missing fields raise :class:`CalibrationError`."""
+        if not isinstance(data, dict):
+            raise CalibrationError(f"expected a mapping, got {type(data).__name__}", camera=name)
+        for key in ("K", "dist", "R", "t", "size"):
+            if key not in data:
+                raise CalibrationError("missing", camera=name, field=key)
+        return cls(name, data["K"], data["dist"], data["R"], data["t"], tuple(data["size"]))
+
+    @classmethod
+    def from_rvec(cls, name: str, K, dist, rvec, t, size) -> Camera:
+        """Build from an axis-angle rotation vector (OpenCV ``rvec``)."""
+        rv = _as_array(np.asarray(rvec, dtype=np.float64).reshape(-1), name, "rvec", (3,))
+        return cls(name, K, dist, rodrigues_to_matrix(rv), t, size)
+
+    @property
+    def rvec(self) -> np.ndarray:
+        """(3,) axis-angle of ``R`` (OpenCV ``rvec``)."""
+        return matrix_to_rodrigues(self.R)
+
+    def __repr__(self) -> str:
+        fx, fy, cx, cy = self.K[0, 0], self.K[1, 1], self.K[0, 2], self.K[1, 2]
+        c = self.center
+        return (
+            f"Camera({self.name!r}, {self.width}x{self.height}, f=({fx:.1f}, {fy:.1f}), "
+            f"c=({cx:.1f}, {cy:.1f}), dist={self.dist.size}, "
+            f"centre=({c[0]:.3f}, {c[1]:.3f}, {c[2]:.3f}))"
+        )

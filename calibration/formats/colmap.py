@@ -1,0 +1,193 @@
+"""COLMAP sparse model (``cameras`` + ``images`` [+ rigs, frames, points3D]) via pycolmap.
+
+One COLMAP camera and one registered image per rig camera; the image is named after the
+camera. Camera models: ``OPENCV`` (fx fy cx cy k1 k2 p1 p2) for up to 4 distortion
+coefficients, ``FULL_OPENCV`` (… k3 k4 k5 k6) for 5 or 8; 12/14-coefficient cameras
+(thin prism, tilt) are written only when those extra terms are zero. Reading also accepts
+``SIMPLE_PINHOLE``, ``PINHOLE``, ``SIMPLE_RADIAL`` and ``RADIAL``.
+
+Pixel convention: COLMAP puts (0, 0) at the top-left CORNER of the top-left pixel, we put
+it at that pixel's centre, so ``c_colmap = c_opencv + 0.5``.
+
+COLMAP has no place for the ground plane and metadata: they go to a sidecar
+``studio_rig.json`` in the same folder (default floor z = 0 when absent).
+"""
+
+from __future__ import annotations
+
+import json
+import logging
+import os
+import shutil
+import tempfile
+from os import PathLike
+from pathlib import Path
+
+import numpy as np
+
+from calibration.camera import Camera
+from calibration.errors import CalibrationError
+from calibration.formats._io import atomic_write_text
+from calibration.ground import GroundPlane
+
+log = logging.getLogger(__name__)
+
+SIDECAR = "studio_rig.json"
+PIXEL_SHIFT = 0.5  # c_colmap - c_opencv
+IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg", ".tif", ".tiff", ".bmp", ".exr")
+
+
+def _camera_name(image_name: str) -> str:
+    p = Path(image_name)
+    return p.stem if p.suffix.lower() in IMAGE_SUFFIXES else image_name
+
+
+def _intrinsics(cam, name: str, path: Path) -> tuple[np.ndarray, np.ndarray]:
+    model = cam.model.name
+    p = np.asarray(cam.params, dtype=np.float64)
+    if model == "SIMPLE_PINHOLE":
+        f, cx, cy = p
+        fx = fy = f
+        dist = np.zeros(0)
+    elif model == "PINHOLE":
+        fx, fy, cx, cy = p
+        dist = np.zeros(0)
+    elif model == "SIMPLE_RADIAL":
+        f, cx, cy, k = p
+        fx = fy = f
+        dist = np.array([k, 0.0, 0.0, 0.0])
+    elif model == "RADIAL":
+        f, cx, cy, k1, k2 = p
+        fx = fy = f
+        dist = np.array([k1, k2, 0.0, 0.0])
+    elif model == "OPENCV":
+        fx, fy, cx, cy = p[:4]
+        dist = p[4:8]
+    elif model == "FULL_OPENCV":
+        fx, fy, cx, cy = p[:4]
+        dist = p[4:12]
+        if not np.any(dist[5:]):
+            dist = dist[:5]
+    else:
+        raise CalibrationError(
+            f"COLMAP camera model {model} is not an OpenCV pinhole model "
+            "(expected OPENCV, FULL_OPENCV, PINHOLE, SIMPLE_PINHOLE, SIMPLE_RADIAL or RADIAL)",
+            file=path, camera=name, field="model",
+        )
+    K = np.array([[fx, 0.0, cx - PIXEL_SHIFT], [0.0, fy, cy - PIXEL_SHIFT], [0.0, 0.0, 1.0]])
+    return K, dist
+
+
+def read_colmap(path: str | PathLike):
+    import pycolmap
+
+    from calibration.rig import RigCalibration
+
+    path = Path(path)
+    if path.is_file():
+        path = path.parent
+    if not ((path / "cameras.txt").exists() or (path / "cameras.bin").exists()):
+        raise CalibrationError("not a COLMAP model folder (no cameras.txt or cameras.bin)", file=path)
+    try:
+        rec = pycolmap.Reconstruction(str(path))
+    except Exception as exc:  # pycolmap raises plain RuntimeError/ValueError on bad files
+        raise CalibrationError(f"pycolmap cannot read the model ({exc})", file=path) from None
+    cameras = {}
+    try:
+        for image_id in sorted(rec.images):
+            image = rec.images[image_id]
+            name = _camera_name(image.name)
+            if not image.has_pose:
+                log.warning("%s: image %s has no pose; skipped", path, image.name)
+                continue
+            K, dist = _intrinsics(image.camera, name, path)
+            pose = image.cam_from_world
+            pose = pose() if callable(pose) else pose  # a method since pycolmap 3.12
+            R = np.asarray(pose.rotation.matrix(), dtype=np.float64)
+            t = np.asarray(pose.translation, dtype=np.float64)
+            cam = image.camera
+            if name in cameras:
+                raise CalibrationError("two images map to this camera name", camera=name, field="name")
+            cameras[name] = Camera(name, K, dist, R, t, (cam.width, cam.height))
+        if not cameras:
+            raise CalibrationError("no registered images", field="images")
+        ground, meta = GroundPlane.floor(), {}
+        sidecar = path / SIDECAR
+        if sidecar.exists():
+            try:
+                doc = json.loads(sidecar.read_text())
+                if str(doc.get("version", 1)).split(".")[0] != "1":
+                    raise CalibrationError(
+                        f"unknown major version {doc['version']!r} (this reader knows 1)",
+                        field="version",
+                    )
+                g = doc.get("ground")
+                if g is not None:
+                    ground = GroundPlane(g["normal"], g["offset"])
+                meta = doc.get("metadata", {})
+            except (json.JSONDecodeError, KeyError, TypeError) as exc:
+                raise CalibrationError(f"bad sidecar ({exc!r})", file=sidecar, field="ground") from None
+            except CalibrationError as exc:
+                raise exc.in_file(sidecar) from None
+        return RigCalibration(cameras, ground, meta)
+    except CalibrationError as exc:
+        raise exc.in_file(path) from None
+
+
+def _params(cam: Camera, path: Path) -> tuple[str, list[float]]:
+    K = cam.K
+    if K[0, 1] != 0:
+        raise CalibrationError(
+            "COLMAP cannot store a skewed K (K[0,1] != 0)", file=path, camera=cam.name, field="K"
+        )
+    base = [K[0, 0], K[1, 1], K[0, 2] + PIXEL_SHIFT, K[1, 2] + PIXEL_SHIFT]
+    d = cam.dist
+    if d.size > 8 and np.any(d[8:]):
+        raise CalibrationError(
+            "thin-prism/tilt terms (coefficients 9-14) have no COLMAP model",
+            file=path, camera=cam.name, field="dist",
+        )
+    d8 = np.zeros(8)
+    d8[: min(8, d.size)] = d[:8]
+    if d.size <= 4 or not np.any(d8[4:]):
+        return "OPENCV", base + d8[:4].tolist()
+    return "FULL_OPENCV", base + d8.tolist()
+
+
+def write_colmap(rig, path: str | PathLike, binary: bool = False) -> Path:
+    """Write the model into folder ``path`` (created); files replaced one by one atomically."""
+    import pycolmap
+
+    path = Path(path)
+    rec = pycolmap.Reconstruction()
+    for i, (name, cam) in enumerate(rig.cameras.items(), start=1):
+        model, params = _params(cam, path)
+        pc = pycolmap.Camera(model=model, width=cam.width, height=cam.height, params=params, camera_id=i)
+        image = pycolmap.Image(name=name, camera_id=i, image_id=i)
+        pose = pycolmap.Rigid3d(pycolmap.Rotation3d(np.asarray(cam.R)), np.asarray(cam.t))
+        if hasattr(rec, "add_image_with_trivial_frame"):  # pycolmap >= 3.12: rigs and frames
+            rec.add_camera_with_trivial_rig(pc)
+            rec.add_image_with_trivial_frame(image, pose)
+        else:  # pragma: no cover - older pycolmap: the pose lives on the image
+            rec.add_camera(pc)
+            image.cam_from_world = pose
+            rec.add_image(image)
+            rec.register_image(i)
+    path.mkdir(parents=True, exist_ok=True)
+    tmp = Path(tempfile.mkdtemp(prefix=".colmap.", dir=path))
+    try:
+        (rec.write_binary if binary else rec.write_text)(str(tmp))
+        for f in sorted(tmp.iterdir()):
+            with open(f, "rb+") as fh:
+                os.fsync(fh.fileno())
+            os.replace(f, path / f.name)
+    finally:
+        shutil.rmtree(tmp, ignore_errors=True)
+    other = (".txt" if binary else ".bin")
+    for stale in ("cameras", "images", "points3D", "rigs", "frames"):
+        if (path / (stale + other)).exists():
+            (path / (stale + other)).unlink()  # never leave a model of the other flavour behind
+    sidecar = {"format": "studio.rig-calibration.colmap-sidecar", "version": 1,
+               "ground": rig.ground.to_dict(), "metadata": rig.metadata}
+    atomic_write_text(path / SIDECAR, json.dumps(sidecar, indent=2) + "\n")
+    return path

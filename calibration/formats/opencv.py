@@ -1,0 +1,245 @@
+"""OpenCV FileStorage YAML as EasyMocap's ``intri.yml`` + ``extri.yml``.
+
+``intri.yml``::
+
+    names: [ "cam0", "cam1" ]           # a sequence of camera names, rig order
+    K_cam0: !!opencv-matrix 3x3
+    dist_cam0: !!opencv-matrix 1xn     # OpenCV order
+    H_cam0: 480                        # image height (optional in EasyMocap files)
+    W_cam0: 640                        # image width
+
+``extri.yml``::
+
+    names: [ ... ]
+    R_cam0: !!opencv-matrix 3x1        # Rodrigues vector, world -> camera
+    Rot_cam0: !!opencv-matrix 3x3      # the same rotation as a matrix
+    T_cam0: !!opencv-matrix 3x1        # metres, X_c = R X_w + t
+    ground_normal, ground_offset       # studio extension (default floor z = 0)
+    studio_metadata: "<json>"          # studio extension
+
+``Rot_`` is read when present (and must agree with ``R_``), else ``R_``. Files without
+``H_``/``W_`` get the image size guessed from the principal point (``2 c + 1``), with a
+warning and the camera names listed in ``metadata["size_guessed"]``.
+"""
+
+from __future__ import annotations
+
+import json
+import logging
+from pathlib import Path
+
+import numpy as np
+
+from calibration.camera import Camera, rodrigues_to_matrix
+from calibration.errors import CalibrationError
+from calibration.formats._io import atomic_path
+from calibration.ground import GroundPlane
+
+log = logging.getLogger(__name__)
+
+ROT_AGREE_TOL = 1e-6
+
+
+def _paths(intri_path, extri_path) -> tuple[Path, Path]:
+    intri = Path(intri_path)
+    if extri_path is None:
+        if intri.suffix.lower() in (".yml", ".yaml"):
+            return intri, intri.with_name(intri.name.replace("intri", "extri"))
+        return intri / "intri.yml", intri / "extri.yml"
+    return intri, Path(extri_path)
+
+
+def _open(path: Path):
+    import cv2
+
+    if not path.is_file():
+        raise CalibrationError("no such file", file=path)
+    try:
+        fs = cv2.FileStorage(str(path), cv2.FILE_STORAGE_READ)
+        opened = fs.isOpened()
+    except (cv2.error, SystemError) as exc:  # the binding may wrap cv2.error in SystemError
+        opened, reason = False, str(getattr(exc, "err", None) or exc.__cause__ or exc)
+    else:
+        reason = "unknown layout"
+    if not opened:
+        raise CalibrationError(f"not an OpenCV FileStorage file ({reason})", file=path)
+    return fs
+
+
+def _names(fs, path: Path) -> list[str]:
+    node = fs.getNode("names")
+    if node.empty() or node.isNone():
+        raise CalibrationError("missing", file=path, field="names")
+    names = []
+    for i in range(node.size()):
+        item = node.at(i)
+        if item.isString():
+            names.append(item.string())
+        elif item.isInt():
+            names.append(str(int(item.real())))
+        else:
+            names.append(f"{item.real():g}")
+    if not names:
+        raise CalibrationError("empty camera list", file=path, field="names")
+    return names
+
+
+def _mat(fs, key: str, path: Path, camera: str, required: bool = True):
+    node = fs.getNode(key)
+    if node.empty() or node.isNone():
+        if required:
+            raise CalibrationError("missing", file=path, camera=camera, field=key)
+        return None
+    if node.isMap() or node.isSeq():
+        import cv2
+
+        try:
+            m = node.mat()
+        except cv2.error:
+            m = None
+        if m is None:
+            raise CalibrationError("not an OpenCV matrix", file=path, camera=camera, field=key)
+        return np.asarray(m, dtype=np.float64)
+    return np.array(node.real(), dtype=np.float64)
+
+
+def read_opencv(intri_path, extri_path=None):
+    from calibration.rig import RigCalibration
+
+    intri_p, extri_p = _paths(intri_path, extri_path)
+    fi, fe = _open(intri_p), _open(extri_p)
+    try:
+        names = _names(fi, intri_p)
+        enames = _names(fe, extri_p) if not fe.getNode("names").empty() else names
+        missing = [n for n in names if n not in enames]
+        if missing:
+            raise CalibrationError(
+                "listed in intri but not in extri", file=extri_p, camera=missing[0], field="names"
+            )
+        cameras = {}
+        guessed = []
+        for name in names:
+            K = _mat(fi, f"K_{name}", intri_p, name)
+            dist = _mat(fi, f"dist_{name}", intri_p, name, required=False)
+            dist = np.zeros(0) if dist is None else dist.reshape(-1)
+            H = _mat(fi, f"H_{name}", intri_p, name, required=False)
+            W = _mat(fi, f"W_{name}", intri_p, name, required=False)
+            if H is None or W is None:
+                if K.shape != (3, 3):
+                    raise CalibrationError(
+                        f"expected shape (3, 3), got {K.shape}", file=intri_p, camera=name, field=f"K_{name}"
+                    )
+                size = (int(round(2 * K[0, 2] + 1)), int(round(2 * K[1, 2] + 1)))
+                guessed.append(name)
+            else:
+                size = (float(W), float(H))
+            Rot = _mat(fe, f"Rot_{name}", extri_p, name, required=False)
+            rvec = _mat(fe, f"R_{name}", extri_p, name, required=False)
+            if Rot is None and rvec is None:
+                raise CalibrationError(
+                    f"missing (neither Rot_{name} nor R_{name})", file=extri_p, camera=name, field=f"R_{name}"
+                )
+            if rvec is not None and rvec.size == 9 and Rot is None:
+                Rot = rvec.reshape(3, 3)  # some writers put the matrix under R_
+                rvec = None
+            if rvec is not None and rvec.size != 3:
+                raise CalibrationError(
+                    f"expected a 3x1 Rodrigues vector, got shape {rvec.shape}",
+                    file=extri_p, camera=name, field=f"R_{name}",
+                )
+            if Rot is None:
+                Rot = rodrigues_to_matrix(rvec.reshape(3))
+            elif rvec is not None and Rot.shape == (3, 3) and np.all(np.isfinite(rvec)):
+                gap = np.max(np.abs(rodrigues_to_matrix(rvec.reshape(3)) - Rot))
+                if gap > ROT_AGREE_TOL:
+                    raise CalibrationError(
+                        f"disagrees with R_{name} (max difference {gap:.3g})",
+                        file=extri_p, camera=name, field=f"Rot_{name}",
+                    )
+            T = _mat(fe, f"T_{name}", extri_p, name)
+            try:
+                cameras[name] = Camera(name, K, dist, Rot, T, size)
+            except CalibrationError as exc:
+                fld = exc.field
+                src = intri_p if fld in ("K", "dist", "size") else extri_p
+                key = {"K": f"K_{name}", "dist": f"dist_{name}", "R": f"Rot_{name}", "t": f"T_{name}",
+                       "size": f"W_{name}/H_{name}"}.get(fld, fld)
+                raise CalibrationError(exc.detail, file=src, camera=name, field=key) from None
+        ground = GroundPlane.floor()
+        gn = _mat(fe, "ground_normal", extri_p, None, required=False)
+        if gn is not None:
+            go = _mat(fe, "ground_offset", extri_p, None)
+            try:
+                ground = GroundPlane(gn.reshape(-1), float(go))
+            except CalibrationError as exc:
+                raise exc.in_file(extri_p) from None
+        meta = {}
+        node = fe.getNode("studio_metadata")
+        if not node.empty():
+            try:
+                meta = json.loads(node.string())
+            except json.JSONDecodeError as exc:
+                raise CalibrationError(f"not JSON ({exc})", file=extri_p, field="studio_metadata") from None
+        if guessed:
+            log.warning(
+                "%s: no H_/W_ image size for %s; guessed from the principal point",
+                intri_p,
+                ", ".join(guessed),
+            )
+            meta["size_guessed"] = guessed
+        return RigCalibration(cameras, ground, meta)
+    finally:
+        fi.release()
+        fe.release()
+
+
+def _write_names(fs, names):
+    import cv2
+
+    fs.startWriteStruct("names", cv2.FileNode_SEQ)
+    for n in names:
+        fs.write("", n)
+    fs.endWriteStruct()
+
+
+def _fix_header(path: Path) -> None:
+    """EasyMocap and OpenCV 4 expect ``%YAML:1.0``; OpenCV 5 writes ``%YAML 1.2``."""
+    text = path.read_text()
+    if text.startswith("%YAML 1.2"):
+        path.write_text("%YAML:1.0" + text[len("%YAML 1.2"):])
+
+
+def write_opencv(rig, intri_path, extri_path=None) -> tuple[Path, Path]:
+    import cv2
+
+    intri_p, extri_p = _paths(intri_path, extri_path)
+    for name in rig.camera_names:
+        bad = [c for c in name if c.isspace() or c in ":{}[],#&*!|>'\"%@`"]
+        if bad or not name:
+            raise CalibrationError(
+                "camera names must be plain words to form FileStorage keys like K_<name>",
+                file=intri_p, camera=name, field="name",
+            )
+    with atomic_path(intri_p, ".yml") as tmp:
+        fs = cv2.FileStorage(str(tmp), cv2.FILE_STORAGE_WRITE)
+        _write_names(fs, rig.camera_names)
+        for name, cam in rig.cameras.items():
+            fs.write(f"K_{name}", cam.K)
+            fs.write(f"dist_{name}", cam.dist.reshape(1, -1) if cam.dist.size else np.zeros((1, 5)))
+            fs.write(f"H_{name}", int(cam.height))
+            fs.write(f"W_{name}", int(cam.width))
+        fs.release()
+        _fix_header(tmp)
+    with atomic_path(extri_p, ".yml") as tmp:
+        fs = cv2.FileStorage(str(tmp), cv2.FILE_STORAGE_WRITE)
+        _write_names(fs, rig.camera_names)
+        for name, cam in rig.cameras.items():
+            fs.write(f"R_{name}", cam.rvec.reshape(3, 1))
+            fs.write(f"Rot_{name}", cam.R)
+            fs.write(f"T_{name}", cam.t.reshape(3, 1))
+        fs.write("ground_normal", rig.ground.normal.reshape(3, 1))
+        fs.write("ground_offset", float(rig.ground.offset))
+        fs.write("studio_metadata", json.dumps(rig.metadata))
+        fs.release()
+        _fix_header(tmp)
+    return intri_p, extri_p

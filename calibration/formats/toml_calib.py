@@ -1,0 +1,160 @@
+"""Pose2Sim / anipose ``Calib.toml``: one table per camera plus ``[metadata]``.
+
+Per camera::
+
+    [cam01]
+    name = "cam01"
+    size = [ 1088, 1920 ]                 # width, height
+    matrix = [ [fx, 0, cx], [0, fy, cy], [0, 0, 1] ]
+    distortions = [ k1, k2, p1, p2 ]      # OpenCV order, any OpenCV length
+    rotation = [ rx, ry, rz ]             # Rodrigues, world -> camera
+    translation = [ tx, ty, tz ]          # metres, X_c = R X_w + t
+    fisheye = false
+
+The ground plane, which the format lacks, is kept in ``[metadata]`` as
+``studio_ground = { normal = [...], offset = ... }`` (default floor z = 0 when absent).
+Fisheye cameras are rejected (our camera model is the OpenCV pinhole one).
+"""
+
+from __future__ import annotations
+
+import tomllib
+from os import PathLike
+from pathlib import Path
+
+import numpy as np
+import tomli_w
+
+from calibration.camera import Camera
+from calibration.errors import CalibrationError
+from calibration.formats._io import atomic_write_text
+from calibration.ground import GroundPlane
+
+GROUND_KEY = "studio_ground"
+REQUIRED = ("size", "matrix", "distortions", "rotation", "translation")
+
+
+def _camera_from_table(key: str, item: dict) -> Camera:
+    if not isinstance(item, dict):
+        raise CalibrationError(f"expected a table, got {type(item).__name__}", camera=key)
+    name = str(item.get("name", key))
+    for field in REQUIRED:
+        if field not in item:
+            raise CalibrationError("missing", camera=name, field=field)
+    if item.get("fisheye", False):
+        raise CalibrationError(
+            "fisheye lenses are not supported (OpenCV pinhole model only)",
+            camera=name,
+            field="fisheye",
+        )
+    try:
+        rvec = np.array(item["rotation"], dtype=np.float64).reshape(-1)
+    except (TypeError, ValueError) as exc:
+        raise CalibrationError(f"not numeric ({exc})", camera=name, field="rotation") from None
+    if rvec.shape == (9,):  # some writers store the matrix
+        R = rvec.reshape(3, 3)
+        return Camera(name, item["matrix"], item["distortions"], R, item["translation"], _size(item, name))
+    if rvec.shape != (3,):
+        raise CalibrationError(
+            f"expected a Rodrigues vector of 3 values, got {rvec.size}", camera=name, field="rotation"
+        )
+    return Camera.from_rvec(
+        name, item["matrix"], item["distortions"], rvec, item["translation"], _size(item, name)
+    )
+
+
+def _size(item: dict, name: str) -> tuple:
+    size = item["size"]
+    if not isinstance(size, (list, tuple)) or len(size) != 2:
+        raise CalibrationError(f"expected [width, height], got {size!r}", camera=name, field="size")
+    return tuple(size)
+
+
+def read_toml(path: str | PathLike):
+    from calibration.rig import RigCalibration
+
+    path = Path(path)
+    try:
+        with open(path, "rb") as f:
+            doc = tomllib.load(f)
+    except OSError as exc:
+        raise CalibrationError(f"cannot read ({exc.strerror})", file=path) from None
+    except tomllib.TOMLDecodeError as exc:
+        raise CalibrationError(f"not valid TOML ({exc})", file=path) from None
+    meta = dict(doc.get("metadata", {}))
+    try:
+        cameras = {}
+        for key, item in doc.items():
+            if key == "metadata":
+                continue
+            cam = _camera_from_table(key, item)
+            if cam.name in cameras:
+                raise CalibrationError("camera name used twice", camera=cam.name, field="name")
+            cameras[cam.name] = cam
+        if not cameras:
+            raise CalibrationError("no camera tables", field="cameras")
+        g = meta.pop(GROUND_KEY, None)
+        if g is None:
+            ground = GroundPlane.floor()
+        elif not isinstance(g, dict) or "normal" not in g or "offset" not in g:
+            raise CalibrationError("expected {normal, offset}", field=f"metadata.{GROUND_KEY}")
+        else:
+            ground = GroundPlane(g["normal"], g["offset"])
+        return RigCalibration(cameras, ground, meta)
+    except CalibrationError as exc:
+        raise exc.in_file(path) from None
+
+
+def rig_to_toml_doc(rig) -> dict:
+    doc: dict = {}
+    for name, cam in rig.cameras.items():
+        doc[name] = {
+            "name": name,
+            "size": [int(cam.width), int(cam.height)],
+            "matrix": cam.K.tolist(),
+            "distortions": cam.dist.tolist(),
+            "rotation": cam.rvec.tolist(),
+            "translation": cam.t.tolist(),
+            "fisheye": False,
+        }
+    meta = {"adjusted": False, "error": 0.0}
+    meta.update(rig.metadata)
+    meta[GROUND_KEY] = rig.ground.to_dict()
+    doc["metadata"] = meta
+    return doc
+
+
+def _value(v) -> str:
+    """One TOML value on one line (Pose2Sim's layout): numbers, strings, bools, lists."""
+    if isinstance(v, bool):
+        return "true" if v else "false"
+    if isinstance(v, (int, np.integer)):
+        return str(int(v))
+    if isinstance(v, (float, np.floating)):
+        return repr(float(v))
+    if isinstance(v, str):
+        return tomli_w.dumps({"x": v})[4:].strip()
+    if isinstance(v, (list, tuple)):
+        return "[ " + ", ".join(_value(x) for x in v) + "]"
+    raise TypeError(f"cannot write {type(v).__name__} as a TOML value")
+
+
+def write_toml(rig, path: str | PathLike) -> Path:
+    if "metadata" in rig.cameras:
+        raise CalibrationError(
+            "a camera named 'metadata' clashes with the [metadata] table", file=path, camera="metadata"
+        )
+    doc = rig_to_toml_doc(rig)
+    meta = doc.pop("metadata")
+    lines = []
+    for name, table in doc.items():
+        lines.append(tomli_w.dumps({name: {}}).strip())  # [name], quoted when needed
+        lines.extend(f"{key} = {_value(value)}" for key, value in table.items())
+        lines.append("")
+    try:
+        lines.append(tomli_w.dumps({"metadata": meta}))
+    except TypeError as exc:
+        raise CalibrationError(
+            f"metadata cannot be written as TOML ({exc})", file=path, field="metadata"
+        ) from None
+    return atomic_write_text(path, "\n".join(lines))

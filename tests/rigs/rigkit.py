@@ -1,0 +1,59 @@
+"""Test kit for the rigs tests: small synthetic source sessions and rig descriptions."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+from rigs import SessionWriter
+
+CAMERAS = ("cam0", "cam1", "cam2", "cam3")
+CALIBRATION = {"format": "studio.rig-calibration", "version": 1, "cameras": {}, "units": "m"}
+
+
+def source_image(cam_index: int, i: int, size=(40, 30), dtype=np.uint8) -> np.ndarray:
+    """A deterministic, distinct image per (camera, frame): noise plus a frame-number band."""
+    w, h = size
+    rng = np.random.default_rng((cam_index, i))
+    top = np.iinfo(dtype).max
+    img = rng.integers(0, top // 2, size=(h, w, 3), dtype=dtype)
+    img[: 2 + i % (h - 2), :, 0] = top  # saturated band: exercises clipping
+    return img
+
+
+def make_source(path: Path, n: int = 6, cameras=CAMERAS, size=(40, 30), backgrounds: int = 2,
+                fps: float = 60.0) -> Path:  # fmt: skip
+    """A session folder like ``studio simulate`` writes: ``n`` frames, backgrounds, calibration."""
+    with SessionWriter.create(path, list(cameras), rig="test-source", fps=fps,
+                              pixel_formats=dict.fromkeys(cameras, "RGB8"),
+                              calibration=CALIBRATION, compression=0) as w:  # fmt: skip
+        for c, cam in enumerate(cameras):
+            for b in range(backgrounds):
+                w.write_background(cam, b, source_image(c, 1000 + b, size))
+        for i in range(n):
+            w.write_frame(
+                i,
+                {cam: source_image(c, i, size) for c, cam in enumerate(cameras)},
+                timestamps_ns={cam: i * 16_666_667 for cam in cameras},
+                frame_ids=dict.fromkeys(cameras, i),
+            )
+    return path
+
+
+def rig_dict(source: Path | None, cameras=CAMERAS, **camera_options) -> dict:
+    """A simulated rig description as a dict (as fast as possible, no jitter by default)."""
+    defaults = {"backend": "simulated", "realtime": False, "pixel_format": "RGB8"}
+    if source is not None:
+        defaults["source"] = str(source)
+    defaults.update(camera_options)
+    return {
+        "format": "studio.rig",
+        "version": 1,
+        "name": "test-rig",
+        "frame_rate": 60.0,
+        "trigger": {"mode": "software"},
+        "sync": {"ptp": True, "tolerance_ms": 2.0},
+        "defaults": defaults,
+        "cameras": {cam: {"device": {"id": f"sim{k}"}} for k, cam in enumerate(cameras)},
+    }

@@ -17,6 +17,21 @@ from calibration.ground import (
 )
 from calibration.rig import RigCalibration
 
+# Calibrating from images (after the core: these modules build on it).
+from calibration.boards import Board, load_board, shipped_boards
+from calibration.bundle import BundleParameterization, BundleResult, bundle_adjust
+from calibration.detect import Detection, detect_board, detect_files
+from calibration.extrinsics import ExtrinsicsResult, calibrate_extrinsics, initial_rig, view_graph
+from calibration.floor import FloorResult, calibrate_floor, floor_check, transform_cameras
+from calibration.intrinsics import (
+    IntrinsicsResult,
+    calibrate_intrinsics,
+    coverage_advice,
+    coverage_map,
+)
+from calibration.report import render_report, write_report
+from calibration.sampling import SampledViews, iter_video_frames, sample_views, sharpness
+
 __all__ = [
     "Camera",
     "CalibrationError",
@@ -29,4 +44,31 @@ __all__ = [
     "FloorGrid",
     "distort_normalized",
     "undistort_normalized",
+    "Board",
+    "load_board",
+    "shipped_boards",
+    "Detection",
+    "detect_board",
+    "detect_files",
+    "IntrinsicsResult",
+    "calibrate_intrinsics",
+    "coverage_map",
+    "coverage_advice",
+    "ExtrinsicsResult",
+    "calibrate_extrinsics",
+    "initial_rig",
+    "view_graph",
+    "BundleResult",
+    "BundleParameterization",
+    "bundle_adjust",
+    "FloorResult",
+    "calibrate_floor",
+    "floor_check",
+    "transform_cameras",
+    "SampledViews",
+    "sample_views",
+    "iter_video_frames",
+    "sharpness",
+    "render_report",
+    "write_report",
 ]

@@ -1,0 +1,37 @@
+"""Rendering: silhouettes, shadow meshes and synthetic colour frames of meshes in cameras.
+
+The silhouette path (:func:`silhouette`, :func:`shadow_mask`) is numpy-only and fast (the
+fitter calls it thousands of times); the colour path (:func:`rasterize` +
+:func:`shade_raster`) adds a z-buffer, barycentric interpolation and Lambertian shading.
+"""
+
+from studio.render.lights import DirectionalLight, PointLight, light_from_dict
+from studio.render.raster import (
+    MAX_SMALL_BBOX,
+    Raster,
+    front_facing,
+    project_vertices,
+    rasterize,
+    silhouette,
+    silhouettes,
+)
+from studio.render.shade import lambert, shade_raster, vertex_normals
+from studio.render.shadow import shadow_mask, shadow_vertices
+
+__all__ = [
+    "DirectionalLight",
+    "MAX_SMALL_BBOX",
+    "PointLight",
+    "Raster",
+    "front_facing",
+    "lambert",
+    "light_from_dict",
+    "project_vertices",
+    "rasterize",
+    "shade_raster",
+    "shadow_mask",
+    "shadow_vertices",
+    "silhouette",
+    "silhouettes",
+    "vertex_normals",
+]

@@ -1,0 +1,331 @@
+"""Build the true bodies of the sample sequences from Anny (build time only).
+
+This is the one module of :mod:`studio.simulate` that imports ``torch`` and ``anny`` (the
+``model-build`` extra), and it does so inside :func:`build_truth`. The result is a compact
+``body.npz`` per sequence that the numpy-only simulator replays:
+
+``vertices_q`` (T, V, 3) int16
+    world vertices in units of ``scale`` metres (0.1 mm), floor at z = 0, person facing the
+    direction given by ``yaw`` (radians about +Z, 0 = facing +X).
+``scale`` () float64, ``faces`` (F, 3) int32, ``parts`` (V,) uint8 index into
+``part_names`` (coarse body part of the dominant skinning bone), ``bone_rotvecs`` (T, B, 3)
+float32 world-aligned axis-angle deltas of the bones named in ``pose_bones`` (Anny's
+``local-ref`` parameterisation), ``root_translation`` (T, 3), ``yaw`` (T,), ``phenotype_names``
+/ ``phenotype_values``, ``pose_names`` (T,), ``rest_height`` (V,) float16 height of each vertex in the rest pose
+as a fraction of stature (for clothing regions) and ``measurements`` (a JSON string).
+
+The people's phenotypes are drawn from Anny's population model (``anny.shape_distribution``,
+adult ages, seeded). The truth is independent of the SCAPE model we fit (``studio.body`` is
+never imported here): measurements come from Anny's ``anthropometry`` (rest pose) and from
+convex-hull slices of the T-pose mesh (chest, hips).
+"""
+
+from __future__ import annotations
+
+import json
+import logging
+import math
+import os
+from pathlib import Path
+
+import numpy as np
+
+__all__ = ["SEQUENCES", "build_truth", "PART_NAMES", "QUANT_SCALE"]
+
+log = logging.getLogger(__name__)
+
+QUANT_SCALE = 1e-4  # metres per int16 step (covers ±3.27 m)
+
+#: Coarse body parts (the thesis' 15 parts) from Anny bone-name prefixes.
+PART_NAMES = (
+    "pelvis", "torso", "head", "upperarm_l", "lowerarm_l", "hand_l", "upperarm_r",
+    "lowerarm_r", "hand_r", "upperleg_l", "lowerleg_l", "foot_l", "upperleg_r",
+    "lowerleg_r", "foot_r",
+)
+
+
+def _bone_part(label: str) -> str:
+    side = "l" if label.endswith(".L") else "r"
+    base = label.split(".")[0]
+    if base in ("root", "pelvis"):
+        return "pelvis"
+    if base.startswith("spine") or base in ("clavicle", "shoulder01"):
+        return "torso"
+    if base.startswith("neck") or base in ("head", "eye", "jaw") or base.startswith("tongue"):
+        return "head"
+    if base.startswith("upperarm"):
+        return f"upperarm_{side}"
+    if base.startswith("lowerarm"):
+        return f"lowerarm_{side}"
+    if base.startswith(("wrist", "finger", "metacarpal")):
+        return f"hand_{side}"
+    if base.startswith("upperleg"):
+        return f"upperleg_{side}"
+    if base.startswith("lowerleg"):
+        return f"lowerleg_{side}"
+    if base.startswith(("foot", "toe")):
+        return f"foot_{side}"
+    return "torso"
+
+
+# --------------------------------------------------------------------------- poses
+def _rot(axis: str, deg: float) -> np.ndarray:
+    v = {"x": (1.0, 0, 0), "y": (0, 1.0, 0), "z": (0, 0, 1.0)}[axis]
+    return np.asarray(v) * math.radians(deg)
+
+
+def _compose(*rotvecs: np.ndarray) -> np.ndarray:
+    """Axis-angle of ``R(r_0) @ R(r_1) @ ...``."""
+    import cv2
+
+    R = np.eye(3)
+    for r in rotvecs:
+        R = R @ cv2.Rodrigues(np.asarray(r, dtype=np.float64))[0]
+    return cv2.Rodrigues(R)[0].ravel()
+
+
+# Anny rest pose: Z up, facing -Y, left = +X, arms ~47° below horizontal ("A-pose").
+# Hip/arm flexion forward = negative rotation about X; knee flexion = positive about X;
+# arm adduction of the left arm = +Y, of the right arm = -Y.
+def _arms_down(deg: float) -> dict[str, np.ndarray]:
+    return {"upperarm01.L": _rot("y", deg), "upperarm01.R": _rot("y", -deg)}
+
+
+def walk_pose(phase: float) -> tuple[dict[str, np.ndarray], float]:
+    """Bone deltas of a walking cycle at ``phase`` ∈ [0, 1) and the vertical bob (m)."""
+    p = 2 * math.pi * phase
+    hip_l = 22.0 * math.sin(p)
+    hip_r = -hip_l
+    knee_l = 8.0 + 45.0 * max(0.0, math.sin(p - 1.9)) ** 1.5
+    knee_r = 8.0 + 45.0 * max(0.0, math.sin(p + math.pi - 1.9)) ** 1.5
+    swing = 16.0 * math.sin(p)
+    pose = {
+        "upperleg01.L": _rot("x", -hip_l),
+        "upperleg01.R": _rot("x", -hip_r),
+        "lowerleg01.L": _rot("x", knee_l),
+        "lowerleg01.R": _rot("x", knee_r),
+        "upperarm01.L": _compose(_rot("x", swing), _rot("y", 32.0)),
+        "upperarm01.R": _compose(_rot("x", -swing), _rot("y", -32.0)),
+        "lowerarm01.L": _rot("x", -12.0),
+        "lowerarm01.R": _rot("x", -12.0),
+        "spine03": _rot("z", 4.0 * math.sin(p)),
+    }
+    bob = 0.02 * math.cos(2 * p)
+    return pose, bob
+
+
+STATIC_POSES: dict[str, dict[str, np.ndarray]] = {
+    "a_pose": {},
+    "t_pose": {"upperarm01.L": _rot("y", -47.0), "upperarm01.R": _rot("y", 47.0),
+               "lowerarm01.L": _rot("y", -10.0), "lowerarm01.R": _rot("y", 10.0)},
+    "arms_forward": {"upperarm01.L": _compose(_rot("x", -80.0), _rot("y", 40.0)),
+                     "upperarm01.R": _compose(_rot("x", -80.0), _rot("y", -40.0))},
+    "wave": {"upperarm01.L": _rot("y", -100.0), "lowerarm01.L": _rot("y", -30.0),
+             **{k: v for k, v in _arms_down(30.0).items() if k.endswith(".R")}},
+    "stride": {"upperleg01.L": _rot("x", -20.0), "upperleg01.R": _rot("x", 15.0),
+               "lowerleg01.R": _rot("x", 20.0), **_arms_down(25.0)},
+    "hands_on_hips": {"upperarm01.L": _rot("y", 5.0), "upperarm01.R": _rot("y", -5.0),
+                      "lowerarm01.L": _compose(_rot("z", 70.0), _rot("y", 60.0)),
+                      "lowerarm01.R": _compose(_rot("z", -70.0), _rot("y", -60.0))},
+}
+
+#: Sequences built by :func:`build_truth`: name → recipe.
+SEQUENCES = {
+    "walk": {"kind": "walk", "frames": 24, "fps": 24.0, "speed": 1.2, "seed": 11,
+             "gender": 1.0, "age_years": (25.0, 40.0)},
+    "clothing_poses": {"kind": "static", "poses": list(STATIC_POSES), "seed": 12,
+                       "gender": 0.0, "age_years": (25.0, 45.0)},
+}
+
+
+# --------------------------------------------------------------------------- build
+def _sample_phenotype(model, seed: int, gender: float, age_years: tuple[float, float]) -> dict:
+    """Draw an adult's phenotype from Anny's population model (``anny.shape_distribution``:
+    height/weight/muscle/proportions conditioned on age, calibrated to WHO data).
+
+    ``gender`` is Anny's (0 male, 1 female); the morphological age is uniform in
+    ``age_years``. Seeded through ``torch.manual_seed``.
+    """
+    import torch
+    from anny.shape_distribution import SimpleShapeDistribution
+
+    torch.manual_seed(seed)
+    t = lambda v: torch.tensor(float(v), dtype=model.dtype)  # noqa: E731
+    dist = SimpleShapeDistribution(
+        model,
+        morphological_age_distribution=torch.distributions.Uniform(t(age_years[0]), t(age_years[1])),
+        gender_distribution=torch.distributions.Uniform(t(gender), t(gender + 1e-9)),
+    )
+    years, kwargs = dist.sample(1)
+    phen = {k: float(v[0]) for k, v in kwargs.items() if k in model.phenotype_labels}
+    phen["gender"] = float(gender)
+    phen["morphological_age_years"] = float(years[0])
+    return phen
+
+
+def _posed(model, poses: list[dict[str, np.ndarray]], phenotype: dict) -> tuple[np.ndarray, np.ndarray]:
+    import roma
+    import torch
+
+    n = len(poses)
+    names = sorted({k for p in poses for k in p})
+    params = {}
+    for name in names:
+        rv = np.stack([p.get(name, np.zeros(3)) for p in poses])
+        T = torch.eye(4, dtype=model.dtype)[None].repeat(n, 1, 1)
+        T[:, :3, :3] = roma.rotvec_to_rotmat(torch.as_tensor(rv, dtype=model.dtype))
+        params[name] = T
+    with torch.no_grad():
+        out = model(pose_parameters=params or None,
+                    phenotype_kwargs={k: torch.full((n,), float(v), dtype=model.dtype)
+                                      for k, v in phenotype.items()})
+    V = out["vertices"].cpu().numpy().astype(np.float64)
+    rest = out["rest_vertices"][:1].cpu().numpy().astype(np.float64)[0]
+    if V.shape[0] != n:
+        V = np.broadcast_to(V, (n,) + V.shape[1:]).copy()
+    return V, rest
+
+
+def _slice_perimeter(V: np.ndarray, F: np.ndarray, z: float, keep) -> float:
+    """Tape-measure perimeter: convex hull of the mesh cross-section at height z."""
+    import cv2
+
+    a, b, c = V[F[:, 0]], V[F[:, 1]], V[F[:, 2]]
+    pts = []
+    for p, q in ((a, b), (b, c), (c, a)):
+        s = (p[:, 2] - z) * (q[:, 2] - z) < 0
+        w = (z - p[s, 2]) / (q[s, 2] - p[s, 2])
+        pts.append(p[s] + w[:, None] * (q[s] - p[s]))
+    P = np.concatenate(pts)
+    P = P[keep(P)]
+    if len(P) < 3:
+        return float("nan")
+    hull = cv2.convexHull(P[:, :2].astype(np.float32))
+    return float(cv2.arcLength(hull, True))
+
+
+def _measurements(model, rest: np.ndarray, tpose: np.ndarray, F: np.ndarray) -> dict:
+    import torch
+    from anny import Anthropometry
+
+    anth = Anthropometry(model)
+    rv = torch.as_tensor(rest[None], dtype=model.dtype)
+    m = {k: float(v[0]) for k, v in anth(rv).items()}
+    V = tpose - [0.0, 0.0, tpose[:, 2].min()]
+    stature = float(V[:, 2].max())
+    # chest: widest torso girth between 70 % and 73 % of stature (below the armpits, which
+    # sit near 76 %); hip: widest between 47 % and 54 %. Arms are out sideways in T-pose.
+    torso = lambda P: np.abs(P[:, 0]) < 0.22  # noqa: E731
+    chest = max(_slice_perimeter(V, F, f * stature, torso) for f in np.linspace(0.70, 0.73, 4))
+    hips = max(_slice_perimeter(V, F, f * stature, torso) for f in np.linspace(0.47, 0.54, 8))
+    return {
+        "units": {"length": "m", "mass": "kg", "volume": "m^3"},
+        "stature": stature,
+        "mass": m["mass"],
+        "volume": m["volume"],
+        "bmi": m["bmi"],
+        "waist_circumference": m["waist_circumference"],
+        "chest_circumference": chest,
+        "hip_circumference": hips,
+        "source": "anny.Anthropometry (rest pose; density 980 kg/m^3) + convex-hull slices of the T-pose mesh",
+    }
+
+
+def _to_world(V: np.ndarray, yaw: float, offset: np.ndarray) -> np.ndarray:
+    """Anny frame (facing -Y) → world: facing direction ``yaw`` about +Z (0 = +X)."""
+    a = yaw + math.pi / 2  # Anny's front (-Y) maps to +X at yaw 0
+    c, s = math.cos(a), math.sin(a)
+    Rz = np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
+    return V @ Rz.T + offset
+
+
+def build_truth(out_dir: str | Path, names: list[str] | None = None, progress=None) -> list[Path]:
+    """Build ``<out_dir>/<name>/body.npz`` for the named sequences (default all).
+
+    Needs the ``model-build`` extra (torch + anny); the first model construction takes
+    about a minute. ``ANNY_CACHE_DIR`` is honoured by anny.
+    """
+    names = list(SEQUENCES) if names is None else list(names)
+    unknown = set(names) - set(SEQUENCES)
+    if unknown:
+        raise ValueError(f"unknown sequence(s) {sorted(unknown)}; known: {sorted(SEQUENCES)}")
+    try:
+        import anny  # noqa: F401
+        import torch  # noqa: F401
+    except ImportError as exc:  # pragma: no cover - depends on the environment
+        raise RuntimeError(
+            f"build-truth needs the model-build extra (torch + anny): {exc}"
+        ) from None
+    model = anny.Anny(topology="anny-noeyes-notongue")
+    F = model.faces.cpu().numpy().astype(np.int32)
+    labels = list(model.bone_labels)
+    vb_idx = model.vertex_bone_indices.cpu().numpy()
+    vb_w = model.vertex_bone_weights.cpu().numpy()
+    dominant = vb_idx[np.arange(len(vb_idx)), np.argmax(vb_w, axis=1)]
+    part_of_bone = np.array([PART_NAMES.index(_bone_part(b)) for b in labels], dtype=np.uint8)
+    parts = part_of_bone[dominant]
+    written = []
+    for name in names:
+        recipe = SEQUENCES[name]
+        rng = np.random.default_rng(recipe["seed"])
+        phen = _sample_phenotype(model, recipe["seed"], recipe["gender"], recipe["age_years"])
+        if recipe["kind"] == "walk":
+            T = recipe["frames"]
+            poses, bobs = zip(*(walk_pose(i / T) for i in range(T)))
+            pose_names = [f"walk_{i / T:.3f}" for i in range(T)]
+        else:
+            poses = [STATIC_POSES[p] for p in recipe["poses"]]
+            bobs = [0.0] * len(poses)
+            pose_names = list(recipe["poses"])
+        anny_phen = {k: v for k, v in phen.items() if k in model.phenotype_labels}
+        V, rest = _posed(model, list(poses), anny_phen)
+        tpose, _ = _posed(model, [STATIC_POSES["t_pose"]], anny_phen)
+        meas = _measurements(model, rest, tpose[0], F)
+        meas["sex"] = "female" if phen["gender"] > 0.5 else "male"
+        meas["age_years"] = phen["morphological_age_years"]
+        n = len(poses)
+        world = np.empty_like(V)
+        yaw = np.zeros(n)
+        root = np.zeros((n, 3))
+        for i in range(n):
+            Vi = V[i]
+            if recipe["kind"] == "walk":
+                yaw[i] = 0.0
+                x = recipe["speed"] * (i - (n - 1) / 2) / recipe["fps"]
+                root[i] = [x, 0.0, 0.0]
+            else:
+                yaw[i] = rng.uniform(-math.pi, math.pi)
+                root[i] = [rng.uniform(-0.15, 0.15), rng.uniform(-0.15, 0.15), 0.0]
+            Wi = _to_world(Vi, yaw[i], np.zeros(3))
+            Wi = Wi + [root[i, 0], root[i, 1], -Wi[:, 2].min()]
+            root[i, 2] = -V[i][:, 2].min()
+            world[i] = Wi
+        pose_bones = sorted({k for p in poses for k in p})
+        rotvecs = np.array([[p.get(b, np.zeros(3)) for b in pose_bones] for p in poses],
+                           dtype=np.float32).reshape(n, len(pose_bones), 3)
+        q = np.round(world / QUANT_SCALE)
+        if np.abs(q).max() > 32767:
+            raise RuntimeError(f"{name}: vertices exceed the int16 range of ±3.27 m")
+        folder = Path(out_dir) / name
+        folder.mkdir(parents=True, exist_ok=True)
+        path = folder / "body.npz"
+        tmp = folder / ".body.npz.tmp.npz"
+        np.savez_compressed(
+            tmp, vertices_q=q.astype(np.int16), scale=np.float64(QUANT_SCALE), faces=F,
+            parts=parts, part_names=np.array(PART_NAMES), pose_bones=np.array(pose_bones),
+            bone_rotvecs=rotvecs, root_translation=root.astype(np.float32),
+            yaw=yaw.astype(np.float32), pose_names=np.array(pose_names),
+            phenotype_names=np.array(list(phen)),
+            phenotype_values=np.array(list(phen.values()), dtype=np.float64),
+            bob=np.asarray(bobs, dtype=np.float32),
+            measurements=np.array(json.dumps(meas)),
+            rest_height=((rest[:, 2] - rest[:, 2].min()) / meas["stature"]).astype(np.float16),
+            source=np.array(f"anny {anny.__version__} topology anny-noeyes-notongue, pose "
+                            "parameterisation local-ref (world-aligned deltas)"),
+        )
+        os.replace(tmp, path)
+        log.info("wrote %s (%d frames, %.1f kB)", path, n, path.stat().st_size / 1e3)
+        written.append(path)
+        if progress is not None:
+            progress(name)
+    return written

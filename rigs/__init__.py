@@ -25,10 +25,17 @@ from rigs.device import (
     FrameTimeout,
     RigError,
 )
-from rigs.imageio import read_image, write_image
+from rigs.imageio import (
+    ImageIOError,
+    atomic_write_bytes,
+    atomic_write_json,
+    atomic_write_text,
+    read_image,
+    write_image,
+)
 from rigs.recorder import Recorder, RecorderStats
 from rigs.rig import Rig, RigStats
-from rigs.session import Session, SessionError, SessionWriter
+from rigs.session import Session, SessionError, SessionWriter, ValidationReport
 from rigs.sync import MultiFrame, SyncGroup, SyncStats
 
 __all__ = [
@@ -41,6 +48,7 @@ __all__ = [
     "Frame",
     "FrameQueue",
     "FrameTimeout",
+    "ImageIOError",
     "MultiFrame",
     "Recorder",
     "RecorderStats",
@@ -55,6 +63,10 @@ __all__ = [
     "SyncGroup",
     "SyncStats",
     "TriggerConfig",
+    "ValidationReport",
+    "atomic_write_bytes",
+    "atomic_write_json",
+    "atomic_write_text",
     "available_backends",
     "default_rig_path",
     "read_image",

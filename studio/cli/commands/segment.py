@@ -1,0 +1,109 @@
+"""``studio segment SESSION``: label every frame background / person / shadow, plus skin."""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+
+def register(subparsers) -> None:
+    p = subparsers.add_parser(
+        "segment",
+        help="segment a capture session into background / person / shadow (+ skin)",
+        description=(
+            "Fit (once) a per-camera HSV background model from the session's empty-scene frames, "
+            "classify every frame into background / person / cast shadow (thesis §5.5.1), fix "
+            "shadow labels by multi-view voting on the calibrated floor (§5.5.2), and detect skin "
+            "inside the person (§6.3.4). Writes SESSION/segmentation/<cam>/NNNNNN.png (0 background, "
+            "1 person, 2 shadow), skin masks, overlays and a summary JSON."
+        ),
+    )
+    p.add_argument("session", type=Path, help="capture-session folder")
+    p.add_argument("--workers", type=int, default=min(2, os.cpu_count() or 1),
+                   help="parallel worker processes over frames (default: %(default)s)")  # fmt: skip
+    p.add_argument("--frames", default=None,
+                   help="frames to segment: START:STOP[:STEP] (indices, STOP excluded) or a comma list")  # fmt: skip
+    p.add_argument("--refit-background", action="store_true",
+                   help="refit the background (and self-trained skin) models even if saved")  # fmt: skip
+    p.add_argument("--no-voting", action="store_true", help="skip multi-view shadow voting")
+    p.add_argument("--no-skin", action="store_true", help="skip skin detection")
+    p.add_argument("--skin-model", type=Path, default=None,
+                   help="a trained skin model (.npz) to use for every camera instead of self-training")  # fmt: skip
+    p.add_argument("--overlay-every", type=int, default=1,
+                   help="write quick-look overlays for every N-th frame (0: none; default 1)")  # fmt: skip
+    p.add_argument("--t-hsv", type=float, default=None, help="eq. 5.5 background threshold t^HSV")
+    p.add_argument("--t-s", type=float, default=None, help="eq. 5.5 saturation threshold t^S")
+    p.set_defaults(func=run)
+
+
+def _parse_frames(text: str | None, available: list[int]) -> list[int] | None:
+    from studio.cli import CommandError
+
+    if text is None:
+        return None
+    try:
+        if ":" in text:
+            parts = [int(v) if v else None for v in text.split(":")]
+            if len(parts) > 3:
+                raise ValueError(text)
+            start, stop = parts[0], parts[1] if len(parts) > 1 else None
+            step = parts[2] if len(parts) > 2 and parts[2] else 1
+            chosen = [i for i in available if (start is None or i >= start) and (stop is None or i < stop)]
+            first = chosen[0] if chosen else 0
+            return [i for i in chosen if (i - first) % step == 0]
+        return [int(v) for v in text.split(",") if v.strip()]
+    except ValueError:
+        raise CommandError(f"--frames: cannot parse {text!r} (expected START:STOP[:STEP] or 1,2,3)") from None
+
+
+def run(args) -> int:
+    from dataclasses import replace
+
+    from rich.progress import BarColumn, MofNCompleteColumn, Progress, TimeRemainingColumn
+
+    from rigs.session import Session
+    from studio.cli import CommandError
+    from studio.segment import SegmentOptions, Thresholds, segment_session
+
+    if args.workers < 1:
+        raise CommandError(f"--workers must be >= 1, got {args.workers}")
+    session = Session.open(args.session)
+    frames = _parse_frames(args.frames, session.frame_indices)
+    if frames is not None and not frames:
+        raise CommandError(f"--frames {args.frames!r} selects no frame of {args.session}")
+    thresholds = None
+    if args.t_hsv is not None or args.t_s is not None:
+        base = Thresholds()
+        thresholds = replace(
+            base,
+            hsv=base.hsv if args.t_hsv is None else args.t_hsv,
+            saturation=base.saturation if args.t_s is None else args.t_s,
+        )
+    options = SegmentOptions(
+        thresholds=thresholds,
+        refit_background=args.refit_background,
+        voting=not args.no_voting,
+        skin=not args.no_skin,
+        skin_model=args.skin_model,
+        overlay_every=max(0, args.overlay_every),
+    )
+    total = len(frames) if frames is not None else session.frame_count
+    with Progress(
+        "[progress.description]{task.description}", BarColumn(), MofNCompleteColumn(), TimeRemainingColumn()
+    ) as bar:
+        task = bar.add_task("segmenting", total=total)
+        summary = segment_session(
+            args.session,
+            options,
+            frames=frames,
+            workers=args.workers,
+            progress=lambda done, n: bar.update(task, completed=done, total=n),
+        )
+    n = len(summary.frames)
+    print(
+        f"segmented {n} frame(s) x {len(summary.cameras)} camera(s) in {summary.seconds:.1f} s "
+        f"({n / max(summary.seconds, 1e-9):.1f} multi-frames/s); voting "
+        f"{'on' if summary.voting else 'off'}; skin models for {summary.skin_cameras or 'no camera'}"
+    )
+    print(f"labels in {summary.path / 'segmentation'}")
+    return 0

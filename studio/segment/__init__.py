@@ -1,0 +1,46 @@
+"""Segmentation: HSV background model, background / person / shadow classification,
+morphology, multi-view shadow voting and the skin classifier (thesis §5.5, §6.3.4).
+
+>>> from studio.segment import BackgroundModel, vote_shadows, SkinClassifier
+"""
+
+from studio.segment.background import BackgroundModel
+from studio.segment.classify import BACKGROUND, PERSON, SHADOW, Thresholds, classify_pixels
+from studio.segment.errors import SegmentationError
+from studio.segment.hsv import circular_mean, circular_std, hue_distance, rgb_to_hsv
+from studio.segment.metrics import binary_scores, tune_thresholds
+from studio.segment.morphology import Morphology, clean_labels, fill_holes, remove_small_components
+from studio.segment.session import SegmentOptions, SegmentationSummary, segment_session
+from studio.segment.skin import SkinClassifier, ycrcb_skin
+from studio.segment.voting import FloorVotes, ShadowVoter, VotingResult, encode_ratio, floor_vote_image, vote_shadows
+
+__all__ = [
+    "BACKGROUND",
+    "PERSON",
+    "SHADOW",
+    "BackgroundModel",
+    "FloorVotes",
+    "Morphology",
+    "SegmentOptions",
+    "SegmentationError",
+    "SegmentationSummary",
+    "ShadowVoter",
+    "SkinClassifier",
+    "Thresholds",
+    "VotingResult",
+    "binary_scores",
+    "circular_mean",
+    "circular_std",
+    "classify_pixels",
+    "clean_labels",
+    "encode_ratio",
+    "fill_holes",
+    "floor_vote_image",
+    "hue_distance",
+    "remove_small_components",
+    "rgb_to_hsv",
+    "segment_session",
+    "tune_thresholds",
+    "vote_shadows",
+    "ycrcb_skin",
+]

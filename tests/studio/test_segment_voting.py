@@ -1,0 +1,143 @@
+"""Multi-view shadow voting on a constructed scene (thesis §5.5.2, fig. 5.3–5.4)."""
+
+import numpy as np
+import pytest
+
+from calibration import FloorGrid
+from studio.segment import (
+    PERSON,
+    SHADOW,
+    BackgroundModel,
+    SegmentationError,
+    ShadowVoter,
+    floor_vote_image,
+    vote_shadows,
+)
+from studio.segment.metrics import label_scores
+from studio.segment.synthetic import SyntheticScene
+
+
+@pytest.fixture(scope="module")
+def scene():
+    scene = SyntheticScene.build(n_cameras=4, size=(120, 90), torso_color=(82, 74, 52))
+    frames, truth, _ = scene.render(seed=3)
+    return scene, frames, truth
+
+
+@pytest.fixture(scope="module")
+def voter(scene):
+    return ShadowVoter(scene[0].calibration)
+
+
+def test_truth_labels_are_a_fixed_point(scene, voter):
+    """Correct labels: every shadow is explained by another view, nothing changes."""
+    _, _, truth = scene
+    result = voter.vote(truth)
+    assert result.iterations == 1
+    assert sum(result.relabelled.values()) < 0.02 * sum((t == SHADOW).sum() for t in truth.values())
+
+
+def test_torso_mislabelled_as_shadow_in_one_view_is_relabelled_person(scene, voter):
+    sc, _, truth = scene
+    cam = "cam1"
+    person = truth[cam] == PERSON
+    rows = np.nonzero(person.any(axis=1))[0]
+    torso = person & (np.arange(person.shape[0])[:, None] < rows[0] + 0.55 * (rows[-1] - rows[0]))
+    torso[:, : np.nonzero(torso.any(axis=0))[0].mean().astype(int) - 2] = False  # half of it
+    corrupted = {c: t.copy() for c, t in truth.items()}
+    corrupted[cam][torso] = SHADOW
+    assert torso.sum() > 100
+    fixed = vote_shadows(corrupted, sc.calibration, voter=voter)
+    assert (fixed[cam][torso] == PERSON).mean() > 0.95
+    for c in truth:  # true shadows survive in every view
+        true_shadow = truth[c] == SHADOW
+        assert (fixed[c][true_shadow] == SHADOW).mean() > 0.95
+
+
+def test_unexplained_shadow_away_from_the_person_stays_shadow(scene, voter):
+    """The conservative rule: only regions touching the person are relabelled."""
+    _, _, truth = scene
+    labels = {c: t.copy() for c, t in truth.items()}
+    labels["cam2"][2:10, 2:12] = SHADOW  # a patch no other view explains, far from the person
+    out = voter.vote(labels).labels
+    assert (out["cam2"][2:10, 2:12] == SHADOW).all()
+
+
+def test_voting_after_single_view_classification_reaches_targets(scene, voter):
+    sc, frames, truth = scene
+    backgrounds = sc.backgrounds(4)
+    labels = {c: BackgroundModel.fit(backgrounds[c]).classify(frames[c]) for c in frames}
+    before = label_scores(list(labels.values()), list(truth.values()))
+    after_labels = voter.vote(labels).labels
+    after = label_scores(list(after_labels.values()), list(truth.values()))
+    assert after["person"]["f1"] > before["person"]["f1"]
+    assert after["person"]["f1"] > 0.95
+    assert after["shadow"]["f1"] > 0.9
+
+
+def test_floor_vote_image_counts_views(scene):
+    sc, _, truth = scene
+    grid = FloorGrid((-3.0, 3.0), (-3.0, 3.0), 0.05)
+    votes = floor_vote_image(truth, sc.calibration, grid)
+    assert votes.shape == grid.shape and votes.dtype == np.uint8
+    assert votes.max() >= 3  # the shadow seen by most views
+    assert (votes >= 2).sum() * 0.05**2 > 0.1  # > 0.1 m² of shadow with two or more votes
+
+
+def test_voting_errors(scene, voter):
+    sc, _, truth = scene
+    with pytest.raises(SegmentationError, match="camera 'nope' is not in the calibration"):
+        ShadowVoter(sc.calibration, ["cam0", "nope"])
+    with pytest.raises(SegmentationError, match="min_votes must be >= 1"):
+        ShadowVoter(sc.calibration, ["cam0"], min_votes=0)
+    with pytest.raises(SegmentationError, match="no labels for camera 'cam3'"):
+        voter.vote({c: truth[c] for c in ("cam0", "cam1", "cam2")})
+    bad = dict(truth, cam0=truth["cam0"][:50])
+    with pytest.raises(SegmentationError, match=r"labels of camera 'cam0' are \(50, 120\) uint8"):
+        voter.vote(bad)
+    with pytest.raises(SegmentationError, match="floor votes: camera 'x' is not in the calibration"):
+        floor_vote_image({"x": truth["cam0"]}, sc.calibration, FloorGrid((0, 1), (0, 1), 0.1))
+
+
+def test_photometric_consistency_rejects_votes_with_another_darkening(scene, voter):
+    """A 'shadow' whose darkening disagrees with the other views' is not explained by them."""
+    from studio.segment.voting import encode_ratio
+
+    _, _, truth = scene
+    ratios = {c: encode_ratio(np.where(t == SHADOW, 0.55, 1.0)) for c, t in truth.items()}
+    cam = max(truth, key=lambda c: (truth[c] == SHADOW).sum())
+    ratios[cam] = encode_ratio(np.where(truth[cam] == SHADOW, 0.15, 1.0))  # e.g. dark trousers
+    shadow = truth[cam] == SHADOW
+    plain = voter.vote(truth).labels[cam]
+    checked = voter.vote(truth, ratios).labels[cam]
+    assert (plain[shadow] == SHADOW).mean() > 0.95
+    assert (checked[shadow] == PERSON).mean() > 0.9
+    consistent = voter.vote(truth, {c: encode_ratio(np.where(t == SHADOW, 0.55, 1.0)) for c, t in truth.items()})
+    assert (consistent.labels[cam][shadow] == SHADOW).mean() > 0.95
+
+
+def test_analyse_matches_classify_and_encodes_the_value_ratio(scene):
+    sc, frames, _ = scene
+    model = BackgroundModel.fit(sc.backgrounds(3)["cam0"])
+    labels, ratio = model.analyse(frames["cam0"])
+    np.testing.assert_array_equal(labels, model.classify(frames["cam0"]))
+    assert ratio.dtype == np.uint8
+    assert abs(int(np.median(ratio[labels == 0])) - 200) <= 4  # background: ratio ≈ 1 → 200
+    assert abs(int(np.median(ratio[labels == SHADOW])) - 110) <= 10  # shadow factor 0.55 → 110
+
+
+def test_ratio_errors(scene, voter):
+    _, _, truth = scene
+    bad = {c: np.zeros(t.shape, np.float32) for c, t in truth.items()}
+    with pytest.raises(SegmentationError, match="value ratios of camera 'cam0' must be a"):
+        voter.vote(truth, bad)
+
+
+def test_floor_votes_reject_unknown_cameras(scene):
+    from studio.segment import FloorVotes
+
+    sc, _, truth = scene
+    votes = FloorVotes(sc.calibration, FloorGrid((-2, 2), (-2, 2), 0.1), ["cam0"])
+    assert votes({"cam0": truth["cam0"]}).max() == 1
+    with pytest.raises(SegmentationError, match="floor votes: camera 'cam1' is not in the calibration"):
+        votes({"cam1": truth["cam1"]})

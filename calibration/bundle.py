@@ -22,6 +22,11 @@ poses, thousands of residuals), so ``scipy.optimize.least_squares`` with ``jac_s
 second (fixed intrinsics, 6 cameras, 150 views: 8-10 s). Free-intrinsics mode refines
 fx fy cx cy k1 k2 p1 p2 k3 (longer distortion vectors are cut to these five).
 
+Fisheye cameras (``Camera.model == "fisheye"``) project through their own ``cv2.fisheye``
+model (:func:`calibration.camera.distort_fisheye`); in free-intrinsics mode their
+``k1 k2 k3 k4`` take the first four distortion slots and the fifth stays 0 (no Jacobian
+entries).
+
 Parameter packing lives in :class:`BundleParameterization` (pack / unpack / sparsity); the
 residual depends only on the parameter vector and never mutates a camera.
 """
@@ -35,7 +40,7 @@ import numpy as np
 from scipy.optimize import least_squares
 from scipy.sparse import coo_matrix
 
-from calibration.camera import Camera, distort_normalized, matrix_to_rodrigues
+from calibration.camera import Camera, distort_fisheye, distort_normalized, matrix_to_rodrigues
 from calibration.detect import Detection
 from calibration.errors import CalibrationError
 
@@ -112,6 +117,7 @@ class BundleParameterization:
             raise CalibrationError(f"bundle adjustment: reference camera {reference!r} not in {list(cameras)}")
         self.templates = dict(cameras)
         self.camera_names = list(cameras)
+        self.fisheye = [c.model == "fisheye" for c in cameras.values()]
         self.view_names = list(view_names)
         self.reference = reference
         self.ref_index = self.camera_names.index(reference)
@@ -178,7 +184,7 @@ class BundleParameterization:
         if self.free_intrinsics:
             intr = x[self.n_cam_pose : self.n_cam_pose + self.n_intr].reshape(C, N_INTR)
             kk = intr[:, :4]
-            dists = [intr[i, 4:] for i in range(C)]
+            dists = [intr[i, 4:8] if self.fisheye[i] else intr[i, 4:] for i in range(C)]
         else:
             kk = np.array([[c.K[0, 0], c.K[1, 1], c.K[0, 2], c.K[1, 2]] for c in self.templates.values()])
             dists = [c.dist for c in self.templates.values()]
@@ -207,7 +213,10 @@ class BundleParameterization:
         rows, cols = [], []
         for i in range(len(self.camera_names)):
             sel = np.flatnonzero(obs.cam == i)
-            for sl in (self.cam_pose_slice(i), self.intr_slice(i)):
+            isl = self.intr_slice(i)
+            if isl is not None and self.fisheye[i]:
+                isl = slice(isl.start, isl.stop - 1)  # fisheye: the fifth coefficient slot is unused
+            for sl in (self.cam_pose_slice(i), isl):
                 if sl is None or len(sel) == 0:
                     continue
                 k = np.arange(sl.start, sl.stop)
@@ -233,7 +242,9 @@ def pose_residuals(x: np.ndarray, param: BundleParameterization, obs: Observatio
     xy = Xc[:, :2] / z[:, None]
     for i, d in enumerate(dists):
         sel = obs.cam == i
-        if sel.any() and np.any(d):
+        if sel.any() and param.fisheye[i]:
+            xy[sel] = distort_fisheye(xy[sel], d)
+        elif sel.any() and np.any(d):
             xy[sel] = distort_normalized(xy[sel], d)
     k = kk[obs.cam]
     uv = np.stack([k[:, 0] * xy[:, 0] + k[:, 2], k[:, 1] * xy[:, 1] + k[:, 3]], axis=1)

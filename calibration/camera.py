@@ -1,8 +1,13 @@
-"""The pinhole camera with OpenCV lens distortion, and its pure projection math.
+"""The OpenCV camera (pinhole or fisheye lens model), and its pure projection math.
 
 Conventions (DESIGN.md): ``X_c = R X_w + t`` with ``R = R_cam_from_world``; pixel
-``(0, 0)`` is the centre of the top-left pixel; distortion coefficients in OpenCV order
-``k1 k2 p1 p2 [k3 [k4 k5 k6 [s1 s2 s3 s4 [tau_x tau_y]]]]``.
+``(0, 0)`` is the centre of the top-left pixel. Two lens models:
+
+- ``"pinhole"``: OpenCV's radial-tangential model, distortion coefficients in OpenCV order
+  ``k1 k2 p1 p2 [k3 [k4 k5 k6 [s1 s2 s3 s4 [tau_x tau_y]]]]`` (``cv2.projectPoints``).
+- ``"fisheye"``: OpenCV's equidistant Kannala–Brandt model (``cv2.fisheye``), exactly four
+  coefficients ``k1 k2 k3 k4``: a ray at angle θ from the optical axis lands at normalized
+  radius ``θ_d = θ (1 + k1 θ² + k2 θ⁴ + k3 θ⁶ + k4 θ⁸)``.
 
 The functions here are vectorised NumPy and stateless; :class:`Camera` only holds the
 parameters and calls them.
@@ -23,14 +28,23 @@ __all__ = [
     "DIST_LENGTHS",
     "distort_normalized",
     "undistort_normalized",
+    "distort_fisheye",
+    "undistort_fisheye",
+    "fisheye_theta",
+    "fisheye_fold_angle",
+    "MODELS",
     "rodrigues_to_matrix",
     "matrix_to_rodrigues",
 ]
 
 log = logging.getLogger(__name__)
 
-#: Lengths of a distortion vector OpenCV accepts.
+#: Lengths of a distortion vector OpenCV accepts (pinhole model).
 DIST_LENGTHS = (0, 4, 5, 8, 12, 14)
+#: Lens models a :class:`Camera` knows: OpenCV radial-tangential and ``cv2.fisheye``.
+MODELS = ("pinhole", "fisheye")
+#: Number of coefficients of the fisheye model (k1 k2 k3 k4).
+FISHEYE_DIST_LENGTH = 4
 #: Largest deviation of ``R Rᵀ`` from the identity accepted as a rotation.
 ORTHONORMAL_TOL = 1e-6
 
@@ -181,6 +195,95 @@ def undistort_normalized(
     return np.stack([x, y], axis=1)
 
 
+# --------------------------------------------------------------------------- fisheye
+def _fisheye_poly(theta: np.ndarray, k: np.ndarray) -> np.ndarray:
+    t2 = theta * theta
+    return theta * (1.0 + t2 * (k[0] + t2 * (k[1] + t2 * (k[2] + t2 * k[3]))))
+
+
+def _fisheye_slope(theta: np.ndarray, k: np.ndarray) -> np.ndarray:
+    t2 = theta * theta
+    return 1.0 + t2 * (3.0 * k[0] + t2 * (5.0 * k[1] + t2 * (7.0 * k[2] + t2 * 9.0 * k[3])))
+
+
+def fisheye_fold_angle(k: np.ndarray, samples: int = 4097) -> float:
+    """Largest off-axis angle θ (radians, ≤ π) up to which the fisheye model is monotone.
+
+    Beyond it ``θ_d(θ)`` turns back, so image radii fold over and cannot be inverted; the
+    angle is the last of ``samples`` grid points on [0, π] before ``dθ_d/dθ`` stops being
+    positive (π when it never does: the usual case for a well-calibrated lens).
+    """
+    k = np.asarray(k, dtype=np.float64).reshape(FISHEYE_DIST_LENGTH)
+    theta = np.linspace(0.0, np.pi, samples)
+    bad = np.flatnonzero(_fisheye_slope(theta, k) <= 0.0)
+    return float(np.pi) if bad.size == 0 else float(theta[max(bad[0] - 1, 0)])
+
+
+def distort_fisheye(xy: np.ndarray, k: np.ndarray) -> np.ndarray:
+    """Apply the ``cv2.fisheye`` model to normalized pinhole coordinates (N, 2) → (N, 2).
+
+    ``r = |xy|``, ``θ = atan r``, ``θ_d = θ (1 + k1 θ² + k2 θ⁴ + k3 θ⁶ + k4 θ⁸)``,
+    result ``xy θ_d / r`` (``xy`` itself for ``r < 1e-8``, as OpenCV). ``k`` (4,).
+    Pixels are then ``K`` applied to the result (with skew ``α = K[0,1] / fx``).
+    """
+    xy = np.asarray(xy, dtype=np.float64)
+    k = np.asarray(k, dtype=np.float64).reshape(FISHEYE_DIST_LENGTH)
+    if len(xy) == 0:
+        return xy.copy()
+    r = np.hypot(xy[:, 0], xy[:, 1])
+    theta_d = _fisheye_poly(np.arctan(r), k)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        scale = np.where(r > 1e-8, theta_d / r, 1.0)
+    return xy * scale[:, None]
+
+
+def fisheye_theta(
+    theta_d: np.ndarray, k: np.ndarray, iterations: int = 30, tol: float = 1e-15
+) -> np.ndarray:
+    """Off-axis angle θ (N,) of distorted normalized radii ``θ_d`` (N,) ≥ 0.
+
+    Newton's method on ``θ (1 + k1 θ² + …) = θ_d`` started at ``θ_d`` and kept inside
+    ``[0, fisheye_fold_angle(k)]``, where the model is monotone, so it cannot jump to another
+    branch. Radii beyond the fold (no angle maps there) give NaN.
+    """
+    theta_d = np.asarray(theta_d, dtype=np.float64)
+    k = np.asarray(k, dtype=np.float64).reshape(FISHEYE_DIST_LENGTH)
+    if not np.any(k):  # equidistant: θ = θ_d, up to a half turn
+        with np.errstate(invalid="ignore"):
+            return np.where(theta_d <= np.pi, theta_d, np.nan)
+    t_max = fisheye_fold_angle(k)
+    with np.errstate(invalid="ignore"):
+        ok = np.isfinite(theta_d) & (theta_d <= _fisheye_poly(np.array(t_max), k) * (1 + 1e-12))
+    theta = np.where(ok, np.clip(theta_d, 0.0, t_max), np.nan)
+    active = np.flatnonzero(ok)
+    for _ in range(iterations):
+        if active.size == 0:
+            break
+        ta = theta[active]
+        step = (_fisheye_poly(ta, k) - theta_d[active]) / _fisheye_slope(ta, k)
+        theta[active] = np.clip(ta - step, 0.0, t_max)
+        active = active[np.abs(step) > tol * np.maximum(1.0, ta)]
+    return theta
+
+
+def undistort_fisheye(xy_d: np.ndarray, k: np.ndarray) -> np.ndarray:
+    """Invert :func:`distort_fisheye`: distorted (N, 2) → normalized pinhole (N, 2).
+
+    Same as ``cv2.fisheye.undistortPoints`` (to its Newton tolerance). Points at or beyond
+    90° off-axis, which a pinhole image plane cannot hold, and radii beyond the model's fold
+    (:func:`fisheye_fold_angle`) give NaN; use :meth:`Camera.pixel_rays` for rays there.
+    """
+    xy_d = np.asarray(xy_d, dtype=np.float64)
+    if len(xy_d) == 0:
+        return xy_d.copy()
+    theta_d = np.hypot(xy_d[:, 0], xy_d[:, 1])
+    theta = fisheye_theta(theta_d, k)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        scale = np.where(theta_d > 1e-8, np.tan(theta) / theta_d, 1.0)
+        scale = np.where(theta < np.pi / 2, scale, np.nan)
+    return xy_d * scale[:, None]
+
+
 # --------------------------------------------------------------------------- validation
 def _as_array(value: Any, camera: str, name: str, shape: tuple[int, ...]) -> np.ndarray:
     try:
@@ -213,17 +316,21 @@ def _check_points(X: Any, dim: int, what: str) -> tuple[np.ndarray, bool]:
 # --------------------------------------------------------------------------- Camera
 @dataclass(frozen=True, eq=False)
 class Camera:
-    """A calibrated camera: OpenCV pinhole + distortion, world → camera pose.
+    """A calibrated camera: OpenCV intrinsics + lens model, world → camera pose.
 
     Attributes
     ----------
     name : camera name (non-empty).
     K : (3, 3) float64 intrinsic matrix ``[[fx, s, cx], [0, fy, cy], [0, 0, 1]]``.
         (OpenCV's own ``projectPoints`` ignores the skew ``s``; keep it 0 for exchange.)
-    dist : (n,) float64, n in ``DIST_LENGTHS``; OpenCV order.
+    dist : (n,) float64; pinhole: n in ``DIST_LENGTHS``, OpenCV order; fisheye: n = 4,
+        ``k1 k2 k3 k4`` of ``cv2.fisheye``.
     R : (3, 3) ``R_cam_from_world``, orthonormal with det +1.
     t : (3,) so that ``X_c = R X_w + t`` (metres).
     size : (width, height) in pixels.
+    model : ``"pinhole"`` (default, OpenCV radial-tangential) or ``"fisheye"``
+        (``cv2.fisheye`` equidistant). "Ideal" / "undistorted" pixels are always those of
+        the pinhole camera with the same ``K`` and no distortion.
 
     Arrays are stored read-only; use :meth:`replace` to derive a changed camera.
     Equality is identity; compare with :meth:`allclose`.
@@ -235,6 +342,7 @@ class Camera:
     R: np.ndarray
     t: np.ndarray
     size: tuple[int, int]
+    model: str = "pinhole"
     _cache: dict = field(default_factory=dict, init=False, repr=False, compare=False)
 
     def __post_init__(self) -> None:
@@ -258,6 +366,18 @@ class Camera:
             d = np.array(self.dist, dtype=np.float64).reshape(-1)
         except (TypeError, ValueError) as exc:
             raise CalibrationError(f"not numeric ({exc})", camera=name, field="dist") from None
+        model = self.model
+        if model not in MODELS:
+            raise CalibrationError(
+                f"expected one of {MODELS}, got {model!r}", camera=name, field="model"
+            )
+        if model == "fisheye" and d.size != FISHEYE_DIST_LENGTH:
+            raise CalibrationError(
+                f"the fisheye model needs exactly {FISHEYE_DIST_LENGTH} coefficients "
+                f"(k1 k2 k3 k4), got {d.size}",
+                camera=name,
+                field="dist",
+            )
         if d.size not in DIST_LENGTHS:
             raise CalibrationError(
                 f"expected {DIST_LENGTHS} coefficients, got {d.size}", camera=name, field="dist"
@@ -312,8 +432,24 @@ class Camera:
         return self.K @ np.hstack([self.R, self.t[:, None]])
 
     @property
+    def is_fisheye(self) -> bool:
+        """``model == "fisheye"``."""
+        return self.model == "fisheye"
+
+    @property
     def has_distortion(self) -> bool:
-        return bool(np.any(self.dist != 0))
+        """Observed pixels differ from ideal pinhole ones (always, for a fisheye lens)."""
+        return self.model == "fisheye" or bool(np.any(self.dist != 0))
+
+    def _distort(self, xy: np.ndarray) -> np.ndarray:
+        if self.model == "fisheye":
+            return distort_fisheye(xy, self.dist)
+        return distort_normalized(xy, self.dist)
+
+    def _undistort(self, xy_d: np.ndarray) -> np.ndarray:
+        if self.model == "fisheye":
+            return undistort_fisheye(xy_d, self.dist)
+        return undistort_normalized(xy_d, self.dist)
 
     # ------------------------------------------------------------------ projection
     def to_camera(self, X: np.ndarray) -> np.ndarray:
@@ -339,7 +475,9 @@ class Camera:
         """Project world points; flag those behind the camera.
 
         Returns ``uv`` (N, 2) pixels (NaN where the point is not in front), ``depth``
-        (N,) camera-frame z, and ``in_front`` (N,) bool (``depth > 0``).
+        (N,) camera-frame z, and ``in_front`` (N,) bool (``depth > 0``). ``distort=False``
+        gives ideal pinhole pixels whatever the lens model. A fisheye camera, too, sees
+        only points in front of it (less than 90° off-axis) here.
         """
         Xc = self.to_camera(X)
         z = Xc[:, 2]
@@ -348,7 +486,7 @@ class Camera:
             xy = Xc[:, :2] / z[:, None]
         xy[~in_front] = np.nan
         if distort and self.has_distortion:
-            xy = distort_normalized(xy, self.dist)
+            xy = self._distort(xy)
         return self._normalized_to_pixels(xy), z, in_front
 
     def project(self, X: np.ndarray, distort: bool = True) -> np.ndarray:
@@ -356,11 +494,14 @@ class Camera:
         return self.project_points(X, distort)[0]
 
     def undistort_pixels(self, uv: np.ndarray) -> np.ndarray:
-        """Remove lens distortion: observed pixels (N, 2) → ideal pinhole pixels, same K."""
+        """Remove lens distortion: observed pixels (N, 2) → ideal pinhole pixels, same K.
+
+        Fisheye: NaN for pixels of rays 90° or more off-axis (no pinhole pixel exists).
+        """
         uv, _ = _check_points(uv, 2, "uv")
         if not self.has_distortion:
             return uv.copy()
-        xy = undistort_normalized(self._pixels_to_normalized(uv), self.dist)
+        xy = self._undistort(self._pixels_to_normalized(uv))
         return self._normalized_to_pixels(xy)
 
     def distort_pixels(self, uv_ideal: np.ndarray) -> np.ndarray:
@@ -368,7 +509,7 @@ class Camera:
         uv, _ = _check_points(uv_ideal, 2, "uv_ideal")
         if not self.has_distortion:
             return uv.copy()
-        xy = distort_normalized(self._pixels_to_normalized(uv), self.dist)
+        xy = self._distort(self._pixels_to_normalized(uv))
         return self._normalized_to_pixels(xy)
 
     def pixel_rays(
@@ -379,12 +520,21 @@ class Camera:
         ``distorted`` says whether ``uv`` are observed (lens-distorted) pixels or ideal ones.
         Returns origins (N, 3) (the camera centre) and unit directions (N, 3) in world
         coordinates; ``project(o + s d)`` gives back ``uv`` for every ``s > 0``.
+        Fisheye rays come straight from the off-axis angle, so they stay exact up to and
+        beyond 90° (NaN only beyond the model's fold, :func:`fisheye_fold_angle`).
         """
         uv, _ = _check_points(uv, 2, "uv")
         xy = self._pixels_to_normalized(uv)
-        if distorted and self.has_distortion:
-            xy = undistort_normalized(xy, self.dist)
-        d_cam = np.hstack([xy, np.ones((len(xy), 1))])
+        if distorted and self.model == "fisheye":
+            theta_d = np.hypot(xy[:, 0], xy[:, 1])
+            theta = fisheye_theta(theta_d, self.dist)
+            with np.errstate(divide="ignore", invalid="ignore"):
+                ratio = np.where(theta_d > 1e-12, np.sin(theta) / theta_d, 1.0)
+            d_cam = np.stack([xy[:, 0] * ratio, xy[:, 1] * ratio, np.cos(theta)], axis=1)
+        else:
+            if distorted and self.has_distortion:
+                xy = undistort_normalized(xy, self.dist)
+            d_cam = np.hstack([xy, np.ones((len(xy), 1))])
         d = d_cam @ self.R  # Rᵀ d_cam for each row
         d /= np.linalg.norm(d, axis=1, keepdims=True)
         return np.broadcast_to(self.center, d.shape).copy(), d
@@ -402,14 +552,23 @@ class Camera:
 
     # ------------------------------------------------------------------ images
     def undistort_maps(self) -> tuple[np.ndarray, np.ndarray]:
-        """(H, W) float32 maps for ``cv2.remap`` giving the undistorted image (same K)."""
+        """(H, W) float32 maps for ``cv2.remap`` giving the undistorted image (same K).
+
+        Fisheye cameras use ``cv2.fisheye.initUndistortRectifyMap`` (the same K, so only the
+        central part of a wide field of view stays in the frame).
+        """
         maps = self._cache.get("undistort_maps")
         if maps is None:
             import cv2
 
-            maps = cv2.initUndistortRectifyMap(
-                self.K, self.dist, None, self.K, self.size, cv2.CV_32FC1
-            )
+            if self.model == "fisheye":
+                maps = cv2.fisheye.initUndistortRectifyMap(
+                    self.K, self.dist, np.eye(3), self.K, self.size, cv2.CV_32FC1
+                )
+            else:
+                maps = cv2.initUndistortRectifyMap(
+                    self.K, self.dist, None, self.K, self.size, cv2.CV_32FC1
+                )
             self._cache["undistort_maps"] = maps
         return maps
 
@@ -442,7 +601,10 @@ class Camera:
         return dc_replace(self, **changes)
 
     def allclose(self, other: Camera, atol: float = 1e-9) -> bool:
-        """True when every parameter agrees to ``atol`` (distortion padded with zeros)."""
+        """True when the models match and every parameter agrees to ``atol`` (distortion
+        padded with zeros)."""
+        if self.model != other.model:
+            return False
         n = max(self.dist.size, other.dist.size)
         da, db = np.zeros(n), np.zeros(n)
         da[: self.dist.size] = self.dist
@@ -457,8 +619,9 @@ class Camera:
         )
 
     def to_dict(self) -> dict:
-        """Plain JSON-able dict ``{K, dist, R, t, size}`` (the native file's per-camera entry)."""
+        """Plain JSON-able dict ``{model, K, dist, R, t, size}`` (native per-camera entry)."""
         return {
+            "model": self.model,
             "K": self.K.tolist(),
             "dist": self.dist.tolist(),
             "R": self.R.tolist(),
@@ -468,19 +631,23 @@ class Camera:
 
     @classmethod
     def from_dict(cls, name: str, data: dict) -> Camera:
-        """Inverse of :meth:`to_dict`; missing fields raise :class:`CalibrationError`."""
+        """Inverse of :meth:`to_dict`; missing fields raise :class:`CalibrationError`.
+
+        ``model`` is optional (files written before it existed are pinhole).
+        """
         if not isinstance(data, dict):
             raise CalibrationError(f"expected a mapping, got {type(data).__name__}", camera=name)
         for key in ("K", "dist", "R", "t", "size"):
             if key not in data:
                 raise CalibrationError("missing", camera=name, field=key)
-        return cls(name, data["K"], data["dist"], data["R"], data["t"], tuple(data["size"]))
+        model = data.get("model", "pinhole")
+        return cls(name, data["K"], data["dist"], data["R"], data["t"], tuple(data["size"]), model)
 
     @classmethod
-    def from_rvec(cls, name: str, K, dist, rvec, t, size) -> Camera:
+    def from_rvec(cls, name: str, K, dist, rvec, t, size, model: str = "pinhole") -> Camera:
         """Build from an axis-angle rotation vector (OpenCV ``rvec``)."""
         rv = _as_array(np.asarray(rvec, dtype=np.float64).reshape(-1), name, "rvec", (3,))
-        return cls(name, K, dist, rodrigues_to_matrix(rv), t, size)
+        return cls(name, K, dist, rodrigues_to_matrix(rv), t, size, model)
 
     @property
     def rvec(self) -> np.ndarray:
@@ -492,6 +659,6 @@ class Camera:
         c = self.center
         return (
             f"Camera({self.name!r}, {self.width}x{self.height}, f=({fx:.1f}, {fy:.1f}), "
-            f"c=({cx:.1f}, {cy:.1f}), dist={self.dist.size}, "
+            f"c=({cx:.1f}, {cy:.1f}), {self.model}, dist={self.dist.size}, "
             f"centre=({c[0]:.3f}, {c[1]:.3f}, {c[2]:.3f}))"
         )

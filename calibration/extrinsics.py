@@ -50,11 +50,18 @@ MAX_EDGE_SPREAD_DEG = 2.0
 
 
 def solve_board_pose(camera: Camera, det: Detection) -> tuple[np.ndarray, np.ndarray, float]:
-    """Board pose in the camera frame ``(R_cam_from_board, t, rms px)`` by PnP with the camera's K, dist."""
+    """Board pose in the camera frame ``(R_cam_from_board, t, rms px)`` by PnP with the camera's K, dist.
+
+    Fisheye cameras: the corners are first undistorted through the camera's own model
+    (:meth:`Camera.undistort_pixels`) and PnP runs on those ideal pinhole pixels; the RMS
+    is measured in the observed (fisheye) image.
+    """
     import cv2
 
     obj = det.object_points.astype(np.float64)
     img = det.image_points.astype(np.float64)
+    if camera.model == "fisheye":
+        return _solve_board_pose_fisheye(camera, det, obj, img)
     ok, rvec, tvec = cv2.solvePnP(obj, img, camera.K, camera.dist, flags=cv2.SOLVEPNP_IPPE)
     if not ok or not (np.all(np.isfinite(rvec)) and np.all(np.isfinite(tvec))):
         raise CalibrationError(
@@ -67,6 +74,28 @@ def solve_board_pose(camera: Camera, det: Detection) -> tuple[np.ndarray, np.nda
     rms = float(np.sqrt(np.mean(np.sum((proj.reshape(-1, 2) - img) ** 2, axis=1))))
     R, _ = cv2.Rodrigues(rvec)
     return R, tvec.reshape(3), rms
+
+
+def _solve_board_pose_fisheye(camera: Camera, det: Detection, obj: np.ndarray, img: np.ndarray):
+    import cv2
+
+    ideal = camera.undistort_pixels(img)
+    keep = np.all(np.isfinite(ideal), axis=1)
+    ok = keep.sum() >= 4
+    if ok:
+        ok, rvec, tvec = cv2.solvePnP(obj[keep], ideal[keep], camera.K, None, flags=cv2.SOLVEPNP_IPPE)
+    if not ok or not (np.all(np.isfinite(rvec)) and np.all(np.isfinite(tvec))):
+        raise CalibrationError(
+            f"view {det.view!r}: no board pose from {det.n} corners (collinear or too few); "
+            "drop this view or recapture it with the board whole and tilted",
+            camera=camera.name,
+        )
+    rvec, tvec = cv2.solvePnPRefineLM(obj[keep], ideal[keep], camera.K, None, rvec, tvec)
+    R, _ = cv2.Rodrigues(rvec)
+    t = tvec.reshape(3)
+    proj = camera.replace(R=R, t=t).project(obj)
+    rms = float(np.sqrt(np.mean(np.sum((proj - img) ** 2, axis=1))))
+    return R, t, rms
 
 
 def rotation_mean(Rs: np.ndarray) -> np.ndarray:
@@ -233,7 +262,11 @@ def calibrate_extrinsics(
         camera → view key → detection; a view key names one board placement, the same key
         in two cameras means both saw that placement at the same time.
     free_intrinsics : bool
-        Also refine fx fy cx cy k1 k2 p1 p2 k3 in the bundle adjustment.
+        Also refine fx fy cx cy k1 k2 p1 p2 k3 (fisheye cameras: k1 k2 k3 k4) in the bundle
+        adjustment.
+
+    Fisheye cameras (``model="fisheye"``) are honoured throughout: PnP on corners undistorted
+    through their model, bundle adjustment projecting through ``cv2.fisheye``'s model.
     """
     init_cams, init_poses, info = initial_rig(cameras, observations, reference)
     ba = bundle_adjust(

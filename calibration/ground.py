@@ -15,7 +15,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from calibration.camera import Camera, _check_points
+from calibration.camera import Camera, _check_points, fisheye_fold_angle
 from calibration.errors import CalibrationError
 
 __all__ = [
@@ -289,6 +289,7 @@ def floor_view(
     else already undistorted). Returns (rows, cols[, C]) of the same dtype with
     ``grid.shape``; row 0 is the largest y (map orientation, see :class:`FloorGrid`).
     Cells whose floor point is behind the camera or outside the image get ``fill``.
+    Fisheye cameras are warped through their own model over the whole field of view.
     Bool masks come back bool; labels and masks should use ``cv2.INTER_NEAREST`` (the
     default for bool images, ``cv2.INTER_LINEAR`` otherwise). Integer label images of
     types OpenCV cannot remap (int32, int64, ...) go through float64 and come back in
@@ -316,7 +317,13 @@ def floor_view(
     world = plane.from_plane_coords(np.stack([X.ravel(), Y.ravel()], axis=1))
     uv_ideal, _, in_front = camera.project_points(world, distort=False)
     uv = uv_ideal
-    if distorted and camera.has_distortion:
+    if distorted and camera.model == "fisheye":
+        # the fisheye model is exact up to 90° off-axis: no margin, only its fold (if any)
+        uv = camera.project_points(world, distort=True)[0]
+        Xc = camera.to_camera(world)
+        theta = np.arctan2(np.hypot(Xc[:, 0], Xc[:, 1]), Xc[:, 2])
+        uv[~in_front | (theta > fisheye_fold_angle(camera.dist))] = np.nan
+    elif distorted and camera.has_distortion:
         # the distortion polynomial is only meaningful near the image: far outside it may
         # fold back into the frame, so only distort ideal positions within a margin
         margin = 0.5 * max(camera.width, camera.height)

@@ -89,14 +89,10 @@ class IntrinsicsResult:
         return float(self.K[1, 2])
 
     def to_camera(self, R=None, t=None):
-        """A :class:`calibration.Camera` with these intrinsics (identity pose unless given)."""
+        """A :class:`calibration.Camera` with these intrinsics (identity pose unless given);
+        a fisheye fit gives a ``model="fisheye"`` camera."""
         from calibration.camera import Camera
 
-        if self.model == "fisheye":
-            raise CalibrationError(
-                f"camera {self.camera!r}: calibration.Camera has no fisheye model yet; "
-                "use the pinhole model (k1..k3) for rig calibration",
-            )
         return Camera(
             self.camera,
             self.K.copy(),
@@ -104,6 +100,7 @@ class IntrinsicsResult:
             np.eye(3) if R is None else np.asarray(R, float),
             np.zeros(3) if t is None else np.asarray(t, float),
             tuple(self.image_size),
+            self.model,
         )
 
     def summary(self) -> dict:

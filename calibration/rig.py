@@ -35,6 +35,7 @@ class RigCalibration:
     Qualisys ``.qca.txt``     :meth:`from_qualisys`              —
     ========================  =================================  ==========================
 
+    Every format keeps each camera's lens model (``Camera.model``, pinhole or fisheye).
     :meth:`load_any` picks the reader from the path. ``rig[name]`` gives a camera;
     iterating a rig yields its :class:`Camera` objects in rig order.
     """
@@ -173,7 +174,8 @@ class RigCalibration:
         return read_colmap(path)
 
     def to_colmap(self, path: str | PathLike, binary: bool = False) -> Path:
-        """Write a COLMAP model folder (OPENCV / FULL_OPENCV cameras, one image per camera)."""
+        """Write a COLMAP model folder (OPENCV / FULL_OPENCV / OPENCV_FISHEYE cameras, one
+        image per camera)."""
         from calibration.formats.colmap import write_colmap
 
         return write_colmap(self, path, binary=binary)

@@ -6,6 +6,13 @@ coefficients, ``FULL_OPENCV`` (… k3 k4 k5 k6) for 5 or 8; 12/14-coefficient ca
 (thin prism, tilt) are written only when those extra terms are zero. Reading also accepts
 ``SIMPLE_PINHOLE``, ``PINHOLE``, ``SIMPLE_RADIAL`` and ``RADIAL``.
 
+Fisheye cameras (``Camera.model == "fisheye"``) are written as ``OPENCV_FISHEYE``
+(fx fy cx cy k1 k2 k3 k4: the same equidistant model and coefficient order as
+``cv2.fisheye``). Reading also accepts COLMAP's special cases of that model:
+``SIMPLE_FISHEYE`` (f cx cy), ``FISHEYE`` (fx fy cx cy), ``SIMPLE_RADIAL_FISHEYE``
+(f cx cy k) and ``RADIAL_FISHEYE`` (f cx cy k1 k2), read as fisheye cameras with the
+missing coefficients zero (checked against ``pycolmap.Camera.img_from_cam`` to 1e-12 px).
+
 Pixel convention: COLMAP puts (0, 0) at the top-left CORNER of the top-left pixel, we put
 it at that pixel's centre, so ``c_colmap = c_opencv + 0.5``.
 
@@ -34,6 +41,10 @@ log = logging.getLogger(__name__)
 
 SIDECAR = "studio_rig.json"
 PIXEL_SHIFT = 0.5  # c_colmap - c_opencv
+#: COLMAP models that are ``cv2.fisheye``'s equidistant model (or special cases of it).
+FISHEYE_MODELS = (
+    "OPENCV_FISHEYE", "FISHEYE", "SIMPLE_FISHEYE", "RADIAL_FISHEYE", "SIMPLE_RADIAL_FISHEYE"
+)
 IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg", ".tif", ".tiff", ".bmp", ".exr")
 
 
@@ -42,9 +53,10 @@ def _camera_name(image_name: str) -> str:
     return p.stem if p.suffix.lower() in IMAGE_SUFFIXES else image_name
 
 
-def _intrinsics(cam, name: str, path: Path) -> tuple[np.ndarray, np.ndarray]:
+def _intrinsics(cam, name: str, path: Path) -> tuple[np.ndarray, np.ndarray, str]:
     model = cam.model.name
     p = np.asarray(cam.params, dtype=np.float64)
+    lens = "pinhole"
     if model == "SIMPLE_PINHOLE":
         f, cx, cy = p
         fx = fy = f
@@ -68,14 +80,26 @@ def _intrinsics(cam, name: str, path: Path) -> tuple[np.ndarray, np.ndarray]:
         dist = p[4:12]
         if not np.any(dist[5:]):
             dist = dist[:5]
+    elif model in FISHEYE_MODELS:
+        lens = "fisheye"
+        if model in ("SIMPLE_FISHEYE", "SIMPLE_RADIAL_FISHEYE", "RADIAL_FISHEYE"):  # one f
+            f, cx, cy = p[:3]
+            fx = fy = f
+            k = p[3:]
+        else:
+            fx, fy, cx, cy = p[:4]
+            k = p[4:]
+        dist = np.zeros(4)
+        dist[: len(k)] = k
     else:
         raise CalibrationError(
-            f"COLMAP camera model {model} is not an OpenCV pinhole model "
-            "(expected OPENCV, FULL_OPENCV, PINHOLE, SIMPLE_PINHOLE, SIMPLE_RADIAL or RADIAL)",
+            f"COLMAP camera model {model} is not an OpenCV pinhole or fisheye model "
+            "(expected OPENCV, FULL_OPENCV, PINHOLE, SIMPLE_PINHOLE, SIMPLE_RADIAL, RADIAL, "
+            f"or {', '.join(FISHEYE_MODELS)})",
             file=path, camera=name, field="model",
         )
     K = np.array([[fx, 0.0, cx - PIXEL_SHIFT], [0.0, fy, cy - PIXEL_SHIFT], [0.0, 0.0, 1.0]])
-    return K, dist
+    return K, dist, lens
 
 
 def read_colmap(path: str | PathLike):
@@ -100,7 +124,7 @@ def read_colmap(path: str | PathLike):
             if not image.has_pose:
                 log.warning("%s: image %s has no pose; skipped", path, image.name)
                 continue
-            K, dist = _intrinsics(image.camera, name, path)
+            K, dist, lens = _intrinsics(image.camera, name, path)
             pose = image.cam_from_world
             pose = pose() if callable(pose) else pose  # a method since pycolmap 3.12
             R = np.asarray(pose.rotation.matrix(), dtype=np.float64)
@@ -108,7 +132,7 @@ def read_colmap(path: str | PathLike):
             cam = image.camera
             if name in cameras:
                 raise CalibrationError("two images map to this camera name", camera=name, field="name")
-            cameras[name] = Camera(name, K, dist, R, t, (cam.width, cam.height))
+            cameras[name] = Camera(name, K, dist, R, t, (cam.width, cam.height), lens)
         if not cameras:
             raise CalibrationError("no registered images", field="images")
         ground, meta = GroundPlane.floor(), {}
@@ -141,6 +165,8 @@ def _params(cam: Camera, path: Path) -> tuple[str, list[float]]:
             "COLMAP cannot store a skewed K (K[0,1] != 0)", file=path, camera=cam.name, field="K"
         )
     base = [K[0, 0], K[1, 1], K[0, 2] + PIXEL_SHIFT, K[1, 2] + PIXEL_SHIFT]
+    if cam.model == "fisheye":
+        return "OPENCV_FISHEYE", base + cam.dist.tolist()
     d = cam.dist
     if d.size > 8 and np.any(d[8:]):
         raise CalibrationError(

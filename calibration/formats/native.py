@@ -1,4 +1,8 @@
-"""The native ``calibration.json``: ``{"format": "studio.rig-calibration", "version": 1, ...}``."""
+"""The native ``calibration.json``: ``{"format": "studio.rig-calibration", "version": 1, ...}``.
+
+Per camera ``{model, K, dist, R, t, size}``. ``model`` (``"pinhole"`` or ``"fisheye"``) was
+added within version 1 as an optional field: files without it are pinhole and still load.
+"""
 
 from __future__ import annotations
 

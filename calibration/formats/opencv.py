@@ -7,6 +7,7 @@
     dist_cam0: !!opencv-matrix 1xn     # OpenCV order
     H_cam0: 480                        # image height (optional in EasyMocap files)
     W_cam0: 640                        # image width
+    model_cam0: "pinhole"              # studio extension: "pinhole" or "fisheye"
 
 ``extri.yml``::
 
@@ -16,6 +17,12 @@
     T_cam0: !!opencv-matrix 3x1        # metres, X_c = R X_w + t
     ground_normal, ground_offset       # studio extension (default floor z = 0)
     studio_metadata: "<json>"          # studio extension
+
+Lens model: EasyMocap's files carry none (its code chooses ``cv2.fisheye`` by hand and reads
+``D_<cam>`` only as a fallback name for the coefficients). We write ``model_<cam>`` for every
+camera; when absent the camera is pinhole. A fisheye camera's ``dist_<cam>`` is its 1x4
+``k1 k2 k3 k4`` (readers unaware of ``model_`` would take them for ``k1 k2 p1 p2``).
+``D_<cam>`` is read when ``dist_<cam>`` is absent, as EasyMocap does.
 
 ``Rot_`` is read when present (and must agree with ``R_``), else ``R_``. Files without
 ``H_``/``W_`` get the image size guessed from the principal point (``2 c + 1``), with a
@@ -103,6 +110,18 @@ def _mat(fs, key: str, path: Path, camera: str, required: bool = True):
     return np.array(node.real(), dtype=np.float64)
 
 
+def _model(fs, name: str, path: Path) -> str:
+    """``model_<name>``: ``"pinhole"`` when absent."""
+    node = fs.getNode(f"model_{name}")
+    if node.empty() or node.isNone():
+        return "pinhole"
+    if not node.isString():
+        raise CalibrationError(
+            "expected a string, 'pinhole' or 'fisheye'", file=path, camera=name, field=f"model_{name}"
+        )
+    return node.string()
+
+
 def read_opencv(intri_path, extri_path=None):
     from calibration.rig import RigCalibration
 
@@ -121,7 +140,10 @@ def read_opencv(intri_path, extri_path=None):
         for name in names:
             K = _mat(fi, f"K_{name}", intri_p, name)
             dist = _mat(fi, f"dist_{name}", intri_p, name, required=False)
+            if dist is None:
+                dist = _mat(fi, f"D_{name}", intri_p, name, required=False)
             dist = np.zeros(0) if dist is None else dist.reshape(-1)
+            model = _model(fi, name, intri_p)
             H = _mat(fi, f"H_{name}", intri_p, name, required=False)
             W = _mat(fi, f"W_{name}", intri_p, name, required=False)
             if H is None or W is None:
@@ -158,12 +180,12 @@ def read_opencv(intri_path, extri_path=None):
                     )
             T = _mat(fe, f"T_{name}", extri_p, name)
             try:
-                cameras[name] = Camera(name, K, dist, Rot, T, size)
+                cameras[name] = Camera(name, K, dist, Rot, T, size, model)
             except CalibrationError as exc:
                 fld = exc.field
-                src = intri_p if fld in ("K", "dist", "size") else extri_p
+                src = intri_p if fld in ("K", "dist", "size", "model") else extri_p
                 key = {"K": f"K_{name}", "dist": f"dist_{name}", "R": f"Rot_{name}", "t": f"T_{name}",
-                       "size": f"W_{name}/H_{name}"}.get(fld, fld)
+                       "size": f"W_{name}/H_{name}", "model": f"model_{name}"}.get(fld, fld)
                 raise CalibrationError(exc.detail, file=src, camera=name, field=key) from None
         ground = GroundPlane.floor()
         gn = _mat(fe, "ground_normal", extri_p, None, required=False)
@@ -228,6 +250,7 @@ def write_opencv(rig, intri_path, extri_path=None) -> tuple[Path, Path]:
             fs.write(f"dist_{name}", cam.dist.reshape(1, -1) if cam.dist.size else np.zeros((1, 5)))
             fs.write(f"H_{name}", int(cam.height))
             fs.write(f"W_{name}", int(cam.width))
+            fs.write(f"model_{name}", cam.model)
         fs.release()
         _fix_header(tmp)
     with atomic_path(extri_p, ".yml") as tmp:

@@ -11,9 +11,12 @@ Per camera::
     translation = [ tx, ty, tz ]          # metres, X_c = R X_w + t
     fisheye = false
 
+``fisheye = true`` (anipose / Pose2Sim) marks a ``cv2.fisheye`` camera: ``distortions`` is
+then ``[k1, k2, k3, k4]`` and the camera is read with ``model="fisheye"``; a missing
+``fisheye`` key means pinhole, as in both tools.
+
 The ground plane, which the format lacks, is kept in ``[metadata]`` as
 ``studio_ground = { normal = [...], offset = ... }`` (default floor z = 0 when absent).
-Fisheye cameras are rejected (our camera model is the OpenCV pinhole one).
 """
 
 from __future__ import annotations
@@ -41,25 +44,27 @@ def _camera_from_table(key: str, item: dict) -> Camera:
     for field in REQUIRED:
         if field not in item:
             raise CalibrationError("missing", camera=name, field=field)
-    if item.get("fisheye", False):
+    fisheye = item.get("fisheye", False)
+    if not isinstance(fisheye, bool):
         raise CalibrationError(
-            "fisheye lenses are not supported (OpenCV pinhole model only)",
-            camera=name,
-            field="fisheye",
+            f"expected true or false, got {fisheye!r}", camera=name, field="fisheye"
         )
+    model = "fisheye" if fisheye else "pinhole"
     try:
         rvec = np.array(item["rotation"], dtype=np.float64).reshape(-1)
     except (TypeError, ValueError) as exc:
         raise CalibrationError(f"not numeric ({exc})", camera=name, field="rotation") from None
     if rvec.shape == (9,):  # some writers store the matrix
         R = rvec.reshape(3, 3)
-        return Camera(name, item["matrix"], item["distortions"], R, item["translation"], _size(item, name))
+        return Camera(
+            name, item["matrix"], item["distortions"], R, item["translation"], _size(item, name), model
+        )
     if rvec.shape != (3,):
         raise CalibrationError(
             f"expected a Rodrigues vector of 3 values, got {rvec.size}", camera=name, field="rotation"
         )
     return Camera.from_rvec(
-        name, item["matrix"], item["distortions"], rvec, item["translation"], _size(item, name)
+        name, item["matrix"], item["distortions"], rvec, item["translation"], _size(item, name), model
     )
 
 
@@ -115,7 +120,7 @@ def rig_to_toml_doc(rig) -> dict:
             "distortions": cam.dist.tolist(),
             "rotation": cam.rvec.tolist(),
             "translation": cam.t.tolist(),
-            "fisheye": False,
+            "fisheye": cam.model == "fisheye",
         }
     meta = {"adjusted": False, "error": 0.0}
     meta.update(rig.metadata)

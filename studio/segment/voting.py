@@ -69,6 +69,8 @@ def _floor_points(camera, plane) -> np.ndarray:
 
 def _project_near(camera, world: np.ndarray) -> np.ndarray:
     """Distorted pixels (N, 2) of ``camera`` for world points; NaN off-screen / behind."""
+    if camera.is_fisheye:  # the fisheye model is monotonic over its whole field
+        return camera.project(world)
     uv_ideal, _, in_front = camera.project_points(world, distort=False)
     if not camera.has_distortion:
         return uv_ideal

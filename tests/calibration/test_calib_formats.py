@@ -39,6 +39,7 @@ def assert_same(a: RigCalibration, b: RigCalibration, atol=1e-9):
     for name in a.camera_names:
         ca, cb = a[name], b[name]
         assert ca.size == cb.size, name
+        assert ca.model == cb.model, name
         np.testing.assert_allclose(cb.K, ca.K, rtol=0, atol=atol)
         n = max(ca.dist.size, cb.dist.size)
         np.testing.assert_allclose(np.pad(cb.dist, (0, n - cb.dist.size)), np.pad(ca.dist, (0, n - ca.dist.size)), rtol=0, atol=atol)
@@ -289,7 +290,7 @@ fisheye = {fisheye}
     "text, message",
     [
         (TOML_OK.format(name="A", rotation="[0.0, 0.0]", fisheye="false"), r"camera 'A': field 'rotation': expected a Rodrigues"),
-        (TOML_OK.format(name="A", rotation="[0.0, 0.0, 0.1]", fisheye="true"), r"camera 'A': field 'fisheye': fisheye lenses"),
+        (TOML_OK.format(name="A", rotation="[0.0, 0.0, 0.1]", fisheye="1"), r"camera 'A': field 'fisheye': expected true or false"),
         (TOML_OK.format(name="A", rotation='["a", 0.0, 0.1]', fisheye="false"), r"camera 'A': field 'rotation': not numeric"),
         (TOML_OK.format(name="A", rotation="[0.0, 0.0, 0.1]", fisheye="false").replace("matrix", "matrixx"), r"camera 'A': field 'matrix': missing"),
         (TOML_OK.format(name="A", rotation="[0.0, 0.0, 0.1]", fisheye="false").replace("[ 640.0, 480.0]", "640"), r"camera 'A': field 'size': expected \[width, height\]"),
@@ -432,11 +433,11 @@ def test_colmap_errors(tmp_path):
     assert_same(RigCalibration([flat]), RigCalibration.from_colmap(tmp_path / "b"))
     with pytest.raises(CalibrationError, match="not a COLMAP model folder"):
         RigCalibration.from_colmap(tmp_path)
-    # a fisheye model cannot become an OpenCV pinhole camera
+    # a model that is neither OpenCV pinhole nor cv2.fisheye (FOV: fx fy cx cy omega)
     cams = tmp_path / "b" / "cameras.txt"
-    cams.write_text(cams.read_text().replace("FULL_OPENCV", "OPENCV_FISHEYE").replace(
-        cams.read_text().splitlines()[-1].split(" ", 4)[-1], " ".join(["800", "800", "320", "240", "0.1", "0", "0", "0"])))
-    with pytest.raises(CalibrationError, match=r"camera '02': field 'model': COLMAP camera model OPENCV_FISHEYE"):
+    cams.write_text(cams.read_text().replace("FULL_OPENCV", "FOV").replace(
+        cams.read_text().splitlines()[-1].split(" ", 4)[-1], " ".join(["800", "800", "320", "240", "0.1"])))
+    with pytest.raises(CalibrationError, match=r"camera '02': field 'model': COLMAP camera model FOV"):
         RigCalibration.from_colmap(tmp_path / "b")
     (tmp_path / "b" / "cameras.txt").write_text("garbage line\n")
     with pytest.raises(CalibrationError, match="pycolmap cannot read"):

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import cv2
 import numpy as np
 import pytest
 
@@ -173,8 +174,14 @@ def test_fisheye_model_runs_on_pinhole_data(shared_data):
     res = calibrate_intrinsics(dets, camera="left", model="fisheye")
     assert res.model == "fisheye" and res.dist.shape == (4,)
     assert abs(res.fx / OPENCV_LEFT_FX - 1) < 0.03 and res.rms < 0.6
-    with pytest.raises(CalibrationError, match="no fisheye model"):
-        res.to_camera()
+    # the fitted model becomes a fisheye Camera that reproduces cv2.fisheye's view errors
+    cam = res.to_camera()
+    assert cam.model == "fisheye" and np.array_equal(cam.dist, res.dist)
+    det = next(d for d in dets if d.view in res.board_poses)
+    rvec, tvec = res.board_poses[det.view]
+    uv = cam.replace(R=cv2.Rodrigues(rvec)[0], t=tvec).project(det.object_points)
+    rms = np.sqrt(np.mean(np.sum((uv - det.image_points) ** 2, axis=1)))
+    assert rms == pytest.approx(res.view_errors[det.view], abs=1e-9)
 
 
 def test_intrinsics_bad_input_names_camera_and_next_capture():

@@ -191,10 +191,7 @@ def run_intrinsics(args) -> int:
     _intrinsics_table(results)
     from calibration.report import write_report
 
-    if args.model == "pinhole":
-        _save({n: r.to_camera() for n, r in results.items()}, {**_metadata_intrinsics(board, results), "extrinsics": "not calibrated"}, args)
-    else:
-        print("fisheye intrinsics are in the report only: calibration.json has no fisheye camera model yet")
+    _save({n: r.to_camera() for n, r in results.items()}, {**_metadata_intrinsics(board, results), "extrinsics": "not calibrated"}, args)
     rep = write_report(_report_path(args), title="Intrinsics calibration", intrinsics=results, detection_summary=detections)
     print(f"wrote {rep}")
     return 0

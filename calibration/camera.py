@@ -493,6 +493,39 @@ class Camera:
         """World points (N, 3) or (3,) → pixels (N, 2); NaN for points behind the camera."""
         return self.project_points(X, distort)[0]
 
+    def project_near(self, X: np.ndarray, margin: float = 0.5) -> np.ndarray:
+        """Distorted pixels (N, 2) of world points where the lens model is trustworthy.
+
+        A radial-tangential polynomial is only meaningful near the image: far outside it
+        may fold back into the frame. Points whose ideal (pinhole) pixel lies more than
+        ``margin`` × the larger image side outside the frame, points behind the camera,
+        and fisheye points past the model's fold-back angle come back as NaN. Use this
+        (not :meth:`project`) when building dense maps over large areas (floor views,
+        view-to-view warps).
+        """
+        uv_ideal, _, in_front = self.project_points(X, distort=False)
+        if self.is_fisheye:
+            uv = self.project_points(X, distort=True)[0]
+            Xc = self.to_camera(np.asarray(X, dtype=np.float64).reshape(-1, 3))
+            theta = np.arctan2(np.hypot(Xc[:, 0], Xc[:, 1]), Xc[:, 2])
+            uv[~in_front | (theta > fisheye_fold_angle(self.dist))] = np.nan
+            return uv
+        if not self.has_distortion:
+            return uv_ideal
+        m = margin * max(self.width, self.height)
+        with np.errstate(invalid="ignore"):
+            near = (
+                in_front
+                & (uv_ideal[:, 0] > -m)
+                & (uv_ideal[:, 0] < self.width + m)
+                & (uv_ideal[:, 1] > -m)
+                & (uv_ideal[:, 1] < self.height + m)
+            )
+        uv = np.full_like(uv_ideal, np.nan)
+        if near.any():
+            uv[near] = self.distort_pixels(uv_ideal[near])
+        return uv
+
     def undistort_pixels(self, uv: np.ndarray) -> np.ndarray:
         """Remove lens distortion: observed pixels (N, 2) → ideal pinhole pixels, same K.
 
@@ -648,6 +681,31 @@ class Camera:
         """Build from an axis-angle rotation vector (OpenCV ``rvec``)."""
         rv = _as_array(np.asarray(rvec, dtype=np.float64).reshape(-1), name, "rvec", (3,))
         return cls(name, K, dist, rodrigues_to_matrix(rv), t, size, model)
+
+    @classmethod
+    def look_at(
+        cls, name: str, center, target, K, size, dist=(), model: str = "pinhole"
+    ) -> Camera:
+        """A camera at ``center`` (3,) looking at ``target`` (3,), world +Z up in the image.
+
+        ``K`` is a (3, 3) matrix or a focal length in pixels (principal point at the image
+        centre). The image x axis is horizontal (perpendicular to world Z).
+        """
+        C = np.asarray(center, dtype=np.float64)
+        z = np.asarray(target, dtype=np.float64) - C
+        z /= np.linalg.norm(z)
+        x = np.cross(z, [0.0, 0.0, 1.0])
+        if np.linalg.norm(x) < 1e-9:
+            raise CalibrationError(
+                "looks straight up or down: give a target off the vertical", camera=name, field="target"
+            )
+        x /= np.linalg.norm(x)
+        R = np.stack([x, np.cross(z, x), z])
+        w, h = int(size[0]), int(size[1])
+        if np.ndim(K) == 0:
+            f = float(K)
+            K = np.array([[f, 0.0, (w - 1) / 2.0], [0.0, f, (h - 1) / 2.0], [0.0, 0.0, 1.0]])
+        return cls(name, K, np.asarray(dist, dtype=np.float64), R, -R @ C, (w, h), model)
 
     @property
     def rvec(self) -> np.ndarray:

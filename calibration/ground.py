@@ -15,7 +15,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from calibration.camera import Camera, _check_points, fisheye_fold_angle
+from calibration.camera import Camera, _check_points
 from calibration.errors import CalibrationError
 
 __all__ = [
@@ -315,28 +315,7 @@ def floor_view(
     rows, cols = grid.shape
     X, Y = grid.cell_centers()
     world = plane.from_plane_coords(np.stack([X.ravel(), Y.ravel()], axis=1))
-    uv_ideal, _, in_front = camera.project_points(world, distort=False)
-    uv = uv_ideal
-    if distorted and camera.model == "fisheye":
-        # the fisheye model is exact up to 90° off-axis: no margin, only its fold (if any)
-        uv = camera.project_points(world, distort=True)[0]
-        Xc = camera.to_camera(world)
-        theta = np.arctan2(np.hypot(Xc[:, 0], Xc[:, 1]), Xc[:, 2])
-        uv[~in_front | (theta > fisheye_fold_angle(camera.dist))] = np.nan
-    elif distorted and camera.has_distortion:
-        # the distortion polynomial is only meaningful near the image: far outside it may
-        # fold back into the frame, so only distort ideal positions within a margin
-        margin = 0.5 * max(camera.width, camera.height)
-        with np.errstate(invalid="ignore"):
-            near = (
-                in_front
-                & (uv_ideal[:, 0] > -margin)
-                & (uv_ideal[:, 0] < camera.width + margin)
-                & (uv_ideal[:, 1] > -margin)
-                & (uv_ideal[:, 1] < camera.height + margin)
-            )
-        uv = np.full_like(uv_ideal, np.nan)
-        uv[near] = camera.distort_pixels(uv_ideal[near])
+    uv = camera.project_near(world) if distorted else camera.project(world, distort=False)
     uv = np.where(np.isfinite(uv), uv, -1e6)
     mx = uv[:, 0].reshape(rows, cols).astype(np.float32)
     my = uv[:, 1].reshape(rows, cols).astype(np.float32)

@@ -44,14 +44,8 @@ def ring_calibration(n_cameras: int, size: tuple[int, int], radius: float = 3.2,
     for i in range(n_cameras):
         a = 2 * np.pi * i / n_cameras + 0.3
         c = np.array([radius * np.cos(a), radius * np.sin(a), height])
-        z = target - c
-        z /= np.linalg.norm(z)
-        x = np.cross(z, [0.0, 0.0, 1.0])
-        x /= np.linalg.norm(x)
-        y = np.cross(z, x)
-        R = np.stack([x, y, z])
         name = f"cam{i}"
-        cams[name] = Camera(name, K, np.zeros(5), R, -R @ c, (w, h))
+        cams[name] = Camera.look_at(name, c, target, K, (w, h), np.zeros(5))
     return RigCalibration(cams, GroundPlane.floor())
 
 

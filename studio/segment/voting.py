@@ -67,28 +67,6 @@ def _floor_points(camera, plane) -> np.ndarray:
     return plane.pixel_to_ground(camera, uv, distorted=True)
 
 
-def _project_near(camera, world: np.ndarray) -> np.ndarray:
-    """Distorted pixels (N, 2) of ``camera`` for world points; NaN off-screen / behind."""
-    if camera.is_fisheye:  # the fisheye model is monotonic over its whole field
-        return camera.project(world)
-    uv_ideal, _, in_front = camera.project_points(world, distort=False)
-    if not camera.has_distortion:
-        return uv_ideal
-    margin = 0.5 * max(camera.width, camera.height)  # distortion folds back far outside
-    with np.errstate(invalid="ignore"):
-        near = (
-            in_front
-            & (uv_ideal[:, 0] > -margin)
-            & (uv_ideal[:, 0] < camera.width + margin)
-            & (uv_ideal[:, 1] > -margin)
-            & (uv_ideal[:, 1] < camera.height + margin)
-        )
-    uv = np.full_like(uv_ideal, np.nan)
-    if near.any():
-        uv[near] = camera.distort_pixels(uv_ideal[near])
-    return uv
-
-
 @dataclass(frozen=True)
 class VotingResult:
     """Labels after voting plus what happened: iterations run, pixels relabelled per view."""
@@ -151,7 +129,7 @@ class ShadowVoter:
             for j in names:
                 if j == k:
                     continue
-                uv = _project_near(calibration[j], floor)
+                uv = calibration[j].project_near(floor)
                 uv = np.where(np.isfinite(uv), uv, -1e4)
                 w, h = cam_k.size
                 mx = uv[:, 0].reshape(h, w).astype(np.float32)
@@ -349,7 +327,7 @@ class FloorVotes:
         rows, cols = grid.shape
         self._maps = {}
         for name in names:
-            uv = _project_near(calibration[name], world)
+            uv = calibration[name].project_near(world)
             uv = np.where(np.isfinite(uv), uv, -1e4)
             mx = uv[:, 0].reshape(rows, cols).astype(np.float32)
             my = uv[:, 1].reshape(rows, cols).astype(np.float32)

@@ -51,20 +51,6 @@ def skin_tone_rgb(tone: float) -> np.ndarray:
 
 
 # --------------------------------------------------------------------------- cameras
-def look_at_camera(name: str, center, target, focal_px: float, size, dist) -> Camera:
-    """A camera at ``center`` looking at ``target`` with world Z up in the image."""
-    C = np.asarray(center, dtype=np.float64)
-    z = np.asarray(target, dtype=np.float64) - C
-    z /= np.linalg.norm(z)
-    x = np.cross(z, [0.0, 0.0, 1.0])
-    x /= np.linalg.norm(x)
-    y = np.cross(z, x)
-    R = np.stack([x, y, z])
-    w, h = size
-    K = np.array([[focal_px, 0.0, (w - 1) / 2.0], [0.0, focal_px, (h - 1) / 2.0], [0.0, 0.0, 1.0]])
-    return Camera(name, K, np.asarray(dist, dtype=np.float64), R, -R @ C, (int(w), int(h)))
-
-
 def ring_cameras(cfg: dict, rng: np.random.Generator | None = None) -> list[Camera]:
     """Cameras on a ring around the capture volume (spec ``cameras`` section).
 
@@ -84,7 +70,7 @@ def ring_cameras(cfg: dict, rng: np.random.Generator | None = None) -> list[Came
         C = [r * math.cos(az), r * math.sin(az), cfg["height"] + 0.05 * rng.uniform(-1, 1)]
         target = np.asarray(cfg["look_at"], dtype=np.float64) + rng.uniform(-0.05, 0.05, 3)
         f = cfg["focal_px"] * (1.0 + 0.01 * rng.uniform(-1, 1))
-        cams.append(look_at_camera(names[i], C, target, f, cfg["size"], cfg["dist"]))
+        cams.append(Camera.look_at(names[i], C, target, f, cfg["size"], cfg["dist"]))
     return cams
 
 

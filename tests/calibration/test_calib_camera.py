@@ -194,3 +194,27 @@ def test_bad_point_shapes():
         cam.project(np.zeros((4, 2)))
     with pytest.raises(ValueError, match=r"uv: expected shape \(N, 2\)"):
         cam.pixel_rays(np.zeros((4, 3)))
+
+
+def test_look_at_points_the_optical_axis_at_the_target():
+    cam = Camera.look_at("c", [3.0, -2.0, 2.0], [0.0, 0.5, 1.0], 500.0, (640, 480))
+    uv = cam.project(np.array([[0.0, 0.5, 1.0]]))
+    np.testing.assert_allclose(uv[0], [319.5, 239.5], atol=1e-9)
+    np.testing.assert_allclose(cam.center, [3.0, -2.0, 2.0], atol=1e-12)
+    # world up projects upwards in the image (smaller v)
+    above = cam.project(np.array([[0.0, 0.5, 1.5]]))[0]
+    assert above[1] < 239.5 - 50 and abs(above[0] - 319.5) < 1e-6
+
+
+def test_look_at_straight_down_is_refused():
+    with pytest.raises(CalibrationError, match="camera 'top'.*target.*vertical"):
+        Camera.look_at("top", [0.0, 0.0, 3.0], [0.0, 0.0, 0.0], 500.0, (640, 480))
+
+
+def test_project_near_equals_project_in_view_and_drops_far_points():
+    cam = Camera.look_at("c", [3.0, 0.0, 1.5], [0.0, 0.0, 1.0], 400.0, (320, 240),
+                         dist=[-0.3, 0.1, 0.0, 0.0, 0.0])
+    near = np.array([[0.0, 0.0, 1.0], [0.1, 0.2, 1.2]])
+    np.testing.assert_allclose(cam.project_near(near), cam.project(near), atol=1e-12)
+    far_off = np.array([[0.0, 40.0, 1.0], [6.0, 0.0, 1.0]])  # far outside the frame; behind
+    assert np.isnan(cam.project_near(far_off)).all()

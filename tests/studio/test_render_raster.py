@@ -3,14 +3,14 @@
 import numpy as np
 import pytest
 
+from calibration import Camera
 from studio.render import front_facing, rasterize, silhouette
-from studio.simulate.scene import look_at_camera
 
 SIZE = (160, 120)
 
 
 def camera(dist=(-0.05, 0.01, 0.0, 0.0, 0.0), name="c"):
-    return look_at_camera(name, [2.0, -1.5, 1.4], [0.0, 0.0, 0.8], 140.0, SIZE, dist)
+    return Camera.look_at(name, [2.0, -1.5, 1.4], [0.0, 0.0, 0.8], 140.0, SIZE, dist)
 
 
 def box(center, half):
@@ -145,10 +145,10 @@ def test_bad_inputs_are_named():
 
 
 def test_silhouettes_of_a_rig():
-    from calibration import RigCalibration
+    from calibration import Camera, RigCalibration
     from studio.render import silhouettes
 
-    cams = [camera(name="a"), look_at_camera("b", [-2.0, 1.0, 1.2], [0, 0, 0.8], 120.0, SIZE, ())]
+    cams = [camera(name="a"), Camera.look_at("b", [-2.0, 1.0, 1.2], [0, 0, 0.8], 120.0, SIZE, ())]
     V, F = sphere([0.0, 0.0, 0.9], 0.2)
     got = silhouettes(RigCalibration({c.name: c for c in cams}), V, F)
     assert list(got) == ["a", "b"]

@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-from calibration import GroundPlane
+from calibration import Camera, GroundPlane
 from studio.render import (
     DirectionalLight,
     PointLight,
@@ -13,7 +13,6 @@ from studio.render import (
     shadow_vertices,
     vertex_normals,
 )
-from studio.simulate.scene import look_at_camera
 
 
 def sphere(center, radius, n=16):
@@ -62,7 +61,7 @@ def test_directional_light_projection():
 def test_shadow_pixels_lie_where_light_ray_meets_floor():
     """The shadow of a ball in the image is centred on the projection of the floor point hit by
     the ray from the light through the ball's centre (eq. 5.2) and has the right size."""
-    cam = look_at_camera("c", [3.0, -2.0, 2.2], [0.0, 0.0, 0.3], 150.0, (160, 120), [-0.04, 0.0, 0, 0])
+    cam = Camera.look_at("c", [3.0, -2.0, 2.2], [0.0, 0.0, 0.3], 150.0, (160, 120), [-0.04, 0.0, 0, 0])
     C = np.array([0.1, -0.1, 0.8])
     V, F = sphere(C, 0.08)
     for light in (PointLight([-0.8, 0.9, 3.2]), DirectionalLight([0.5, -0.3, -1.0])):
@@ -123,7 +122,7 @@ def test_light_spec_errors():
 
 
 def test_shadow_of_closed_mesh_equals_all_faces():
-    cam = look_at_camera("c", [3.0, -2.0, 2.2], [0.0, 0.0, 0.3], 150.0, (160, 120), [-0.04, 0.0, 0, 0])
+    cam = Camera.look_at("c", [3.0, -2.0, 2.2], [0.0, 0.0, 0.3], 150.0, (160, 120), [-0.04, 0.0, 0, 0])
     V, F = sphere([0.2, 0.1, 0.7], 0.25)
     for light in (PointLight([-0.8, 0.9, 3.2]), DirectionalLight([0.5, -0.3, -1.0])):
         a = shadow_mask(cam, V, F, light)

@@ -1,0 +1,236 @@
+"""The shipped SCAPE models: loading, consistency, generation, input checks."""
+
+import numpy as np
+import pytest
+
+from studio.body import GENDERS, PART_NAMES, POSE_SIZE, BodyModel, BodyModelError
+from studio.body.model import DATA_FILE
+from studio.body.scape import rotvec_to_matrix
+
+
+@pytest.fixture(scope="module")
+def model():
+    return BodyModel.load("neutral")
+
+
+def test_shipped_file_is_small_and_all_genders_load():
+    assert DATA_FILE.is_file()
+    total = sum(p.stat().st_size for p in DATA_FILE.parent.iterdir() if p.is_file())
+    assert total < 30e6
+    for g in GENDERS:
+        m = BodyModel.load(g)
+        assert m.gender == g and m.n_shape >= 20
+        assert np.all(m.eigenvalues > 0) and np.all(np.diff(m.eigenvalues) <= 0)
+    assert BodyModel.load("male") is BodyModel.load("male")  # cached
+
+
+def test_arrays_are_consistent(model):
+    V, F = model.n_vertices, len(model.faces)
+    assert 5000 <= V <= 10000
+    assert model.faces.shape == (F, 3) and model.faces.max() == V - 1
+    assert model.parts.shape == (V,) and set(np.unique(model.parts)) == set(range(15))
+    assert model.part_names == PART_NAMES and len(PART_NAMES) == 15
+    assert model.pose_size == POSE_SIZE == 30
+    lim = model.pose_limits
+    assert lim.shape == (30, 2) and np.all(lim[:, 0] <= lim[:, 1])
+    p0 = model.default_pose()
+    assert np.all((p0 >= lim[:, 0]) & (p0 <= lim[:, 1]))
+    # watertight: every edge shared by exactly two triangles
+    f = model.faces
+    e = np.sort(np.concatenate([f[:, [0, 1]], f[:, [1, 2]], f[:, [2, 0]]]), axis=1)
+    _, counts = np.unique(e, axis=0, return_counts=True)
+    assert np.all(counts == 2)
+    # left/right symmetric template
+    from scipy.spatial import cKDTree
+
+    d, _ = cKDTree(model.template).query(model.template * [-1, 1, 1])
+    assert d.max() < 1e-6
+
+
+def test_default_pose_stands_on_floor_facing_minus_y(model):
+    v = model.vertices(model.mean_shape())
+    assert abs(v[:, 2].min()) < 1e-5
+    assert 1.5 < v[:, 2].max() < 2.0
+    pelvis = v[model.parts == PART_NAMES.index("pelvis")].mean(axis=0)
+    assert np.allclose(pelvis[:2], 0.0, atol=1e-5)
+    head = v[model.parts == PART_NAMES.index("head")]
+    nose = head[np.argmax(-head[:, 1])]
+    assert nose[1] < pelvis[1] - 0.05  # the face points to -y
+    J = model.joints(model.mean_shape())
+    assert J[PART_NAMES.index("upperarm_l"), 0] > 0.1  # subject's left at +x
+
+
+def test_translation_and_root_rotation_move_the_body_rigidly(model):
+    s = model.sample_shapes(1, 0)[0]
+    p = model.default_pose()
+    v0 = model.vertices(s, p)
+    p[:3] = [0.5, -1.0, 0.2]
+    assert np.allclose(model.vertices(s, p), v0 + [0.5, -1.0, 0.2], atol=1e-9)
+    p = model.default_pose()
+    p[3:6] = [0, 0, np.pi / 2]
+    v1 = model.vertices(s, p)
+    c = v0[model.parts == 0].mean(axis=0)
+    R = rotvec_to_matrix(np.array([0, 0, np.pi / 2]))
+    assert np.abs(v1 - ((v0 - c) @ R.T + c)).max() < 1e-3
+
+
+def test_batch_equals_single(model):
+    rng = np.random.default_rng(4)
+    S = model.sample_shapes(3, rng)
+    P = np.tile(model.default_pose(), (3, 1))
+    lim = model.pose_limits
+    P[:, 6:] = lim[6:, 0] + rng.uniform(0.3, 0.7, (3, 24)) * (lim[6:, 1] - lim[6:, 0])
+    batch = model.vertices_batch(S, P)
+    assert batch.shape == (3, model.n_vertices, 3)
+    for i in range(3):
+        assert np.abs(batch[i] - model.vertices(S[i], P[i])).max() < 1e-6
+    J = model.joints_batch(S, P)
+    assert np.allclose(J[1], model.joints(S[1], P[1]))
+
+
+def test_knee_bend_moves_only_the_leg_and_q_changes_the_joint(model):
+    s = model.mean_shape()
+    p = model.default_pose()
+    i = 6 + 3 + 1 + 5 + 5 + 3  # lowerleg_l hinge
+    assert "lowerleg_l" in __import__("studio.body.model", fromlist=["pose_entry_name"]).pose_entry_name(i)
+    p[i] = 1.2
+    v0, v1 = model.vertices(s), model.vertices(s, p)
+    moved = np.linalg.norm(v1 - v0, axis=1)
+    foot = model.parts == PART_NAMES.index("foot_l")
+    head = model.parts == PART_NAMES.index("head")
+    assert moved[foot].mean() > 0.2 and moved[head].mean() < 0.01
+    rigid = model.vertices(s, p, use_q=False)
+    assert np.abs(rigid - v1).max() > 1e-3  # Q deforms near the knee
+
+
+def test_bad_inputs_raise_clear_errors(model):
+    s = model.mean_shape()
+    with pytest.raises(BodyModelError, match="shape must have shape"):
+        model.vertices(np.zeros(3))
+    with pytest.raises(BodyModelError, match="NaN"):
+        model.vertices(np.full(model.n_shape, np.nan))
+    with pytest.raises(BodyModelError, match="pose must have shape"):
+        model.vertices(s, np.zeros(7))
+    bad = model.default_pose()
+    bad[10] = np.inf
+    with pytest.raises(BodyModelError, match="pose contains NaN"):
+        model.vertices(s, bad)
+    bad = model.default_pose()
+    knee = 6 + 3 + 1 + 5 + 5 + 3
+    bad[knee] = -1.0
+    with pytest.raises(BodyModelError, match="lowerleg_l hinge angle.*outside its limits"):
+        model.vertices(s, bad)
+    assert model.clip_pose(bad)[knee] == model.pose_limits[knee, 0]
+    with pytest.raises(BodyModelError, match="same batch size"):
+        model.vertices_batch(np.zeros((2, model.n_shape)), np.zeros((3, 30)))
+    with pytest.raises(BodyModelError, match="unknown gender"):
+        BodyModel.load("robot")
+    with pytest.raises(BodyModelError, match="not found"):
+        BodyModel.load("male", "/nonexistent/model.npz")
+
+
+def test_mesh_export_round_trip(model, tmp_path):
+    from studio.body import read_ply
+
+    v = model.vertices(model.mean_shape())
+    path = model.save_mesh(tmp_path / "body.ply", v)
+    v2, f2 = read_ply(path)
+    assert np.allclose(v2, v, atol=1e-6) and np.array_equal(f2, model.faces)
+    obj = model.save_mesh(tmp_path / "body.obj", v).read_text().splitlines()
+    assert sum(line.startswith("v ") for line in obj) == model.n_vertices
+    with pytest.raises(ValueError, match="must be .ply or .obj"):
+        model.save_mesh(tmp_path / "body.stl", v)
+
+
+def test_shape_from_vertices_recovers_a_body(model):
+    s = model.sample_shapes(2, 6)
+    v = model.vertices_batch(s, np.zeros((2, 30)))
+    est = model.shape_from_vertices(v)
+    assert est.shape == (2, model.n_shape)
+    back = model.vertices_batch(est, np.zeros((2, 30)))
+    d = back - v
+    err = np.linalg.norm(d - d.mean(axis=1, keepdims=True), axis=-1)  # up to translation
+    assert err.mean() < 1.5e-3 and err.max() < 6e-3  # the LS mesh is not exactly its own D
+    with pytest.raises(BodyModelError, match="template correspondence"):
+        model.shape_from_vertices(np.zeros((10, 3)))
+
+
+def test_anny_correspondence_is_barycentric(model):
+    from studio.body import anny_correspondence
+
+    M = anny_correspondence()
+    assert M.shape == (model.n_vertices, 13348)
+    assert np.allclose(np.asarray(M.sum(axis=1)).ravel(), 1.0, atol=1e-6)
+    assert M.getnnz(axis=1).max() <= 3
+    with pytest.raises(BodyModelError, match="not found"):
+        anny_correspondence("/nonexistent.npz")
+
+
+def cube_model(**over):
+    """A one-part BodyModel on a unit cube: D = (1 + s)·I, no pose deformation."""
+    from studio.body.skeleton import default_limits
+
+    v = np.array([[x, y, z] for x in (0, 1) for y in (0, 1) for z in (0, 1)], dtype=float)
+    f = np.array([[0, 2, 3], [0, 3, 1], [4, 5, 7], [4, 7, 6], [0, 1, 5], [0, 5, 4],
+                  [2, 6, 7], [2, 7, 3], [0, 4, 6], [0, 6, 2], [1, 3, 7], [1, 7, 5]])
+    F = len(f)
+    args = dict(
+        gender="cube", template=v, faces=f, parts=np.zeros(8, int), face_parts=np.zeros(F, int),
+        D_mean=np.tile(np.eye(3).ravel(), F), D_basis=np.tile(np.eye(3).ravel(), F)[None],
+        eigenvalues=np.ones(1), hinge_axes=np.tile([1.0, 0, 0], (15, 1)), pose_limits=default_limits(),
+        joint_regressor=np.full((15, 8), 1 / 8), joint_pairs=np.zeros((F, 2), int), Q_coef=None,
+    )
+    args.update(over)
+    return BodyModel(**args)
+
+
+def test_generation_on_an_analytic_cube():
+    m = cube_model()
+    v = m.vertices(np.array([0.5]))
+    # scaled by 1.5, standing on the floor, centred over the origin
+    assert np.allclose(v.min(axis=0), [-0.75, -0.75, 0.0], atol=1e-9)
+    assert np.allclose(v.max(axis=0), [0.75, 0.75, 1.5], atol=1e-9)
+    pose = m.default_pose()
+    pose[3:6] = [np.pi / 2, 0, 0]
+    pose[:3] = [1, 2, 3]
+    w = m.vertices(np.array([0.0]), pose)
+    R = rotvec_to_matrix(np.array([np.pi / 2, 0, 0]))
+    ref = (m.vertices(np.array([0.0])) - [0, 0, 0.5]) @ R.T + [1, 2, 3.5]
+    assert np.allclose(w, ref, atol=1e-6)
+    assert np.allclose(m.joints(np.array([0.0]), pose)[0], [1, 2, 3.5], atol=1e-6)
+
+
+def test_inconsistent_model_arrays_are_rejected():
+    with pytest.raises(BodyModelError, match="faces must be"):
+        cube_model(faces=np.array([[0, 1, 99]]))
+    with pytest.raises(BodyModelError, match="parts must be"):
+        cube_model(parts=np.zeros(3, int))
+    with pytest.raises(BodyModelError, match="grouped by part"):
+        cube_model(face_parts=np.array([1, 0] + [1] * 10))
+    with pytest.raises(BodyModelError, match="F\\*9"):
+        cube_model(D_mean=np.zeros(5))
+    with pytest.raises(BodyModelError, match="pose_limits"):
+        cube_model(pose_limits=np.zeros((3, 2)))
+
+
+def test_model_file_without_the_gender_is_rejected(tmp_path):
+    path = tmp_path / "partial.npz"
+    np.savez(path, template=np.zeros((3, 3)))
+    with pytest.raises(BodyModelError, match="no model for gender 'male'"):
+        BodyModel.load("male", path)
+
+
+def test_mesh_io_rejects_bad_arrays_and_formats(tmp_path):
+    from studio.body import read_ply, write_mesh
+
+    with pytest.raises(ValueError, match="vertices must be"):
+        write_mesh(tmp_path / "a.ply", np.zeros((4, 2)), np.array([[0, 1, 2]]))
+    with pytest.raises(ValueError, match="faces must be"):
+        write_mesh(tmp_path / "a.ply", np.zeros((4, 3)), np.array([[0, 1, 9]]))
+    colored = write_mesh(tmp_path / "c.ply", np.eye(3), np.array([[0, 1, 2]]), colors=np.full((3, 3), 200))
+    with pytest.raises(ValueError, match="colored PLY"):
+        read_ply(colored)
+    ascii_ply = tmp_path / "ascii.ply"
+    ascii_ply.write_bytes(b"ply\nformat ascii 1.0\nelement vertex 0\nelement face 0\nend_header\n")
+    with pytest.raises(ValueError, match="binary little-endian"):
+        read_ply(ascii_ply)

@@ -1,0 +1,110 @@
+"""Fit speed on the simulated walk (anchors: cost ≤ 10 ms, one frame ≤ 60 s; thesis ~40 min Matlab).
+
+- one 4-view cost evaluation at full resolution (656×490): render the 4 silhouettes of a
+  fixed mesh + the silhouette cost (eq. 4.6), and the SCAPE mesh itself (batched);
+- the same at the pyramid levels the fitter searches with;
+- one single-frame fit from the silhouettes (particle filter → staged Nelder–Mead);
+- a sequence of N frames (default 20) fitted with 1 and with 2 worker processes.
+
+Usage: ``.venv/bin/python benchmarks/fit_speed.py [--sequence 20] [--quick]``
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import shutil
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))
+
+
+def _best(fn, repeat=20):
+    fn()
+    ts = []
+    for _ in range(repeat):
+        t = time.perf_counter()
+        fn()
+        ts.append(time.perf_counter() - t)
+    return float(np.median(ts))
+
+
+def main(argv=None) -> int:
+    from studio.body import BodyModel
+    from studio.cli.commands.fit import QUICK
+    from studio.cost import SilhouetteTarget, silhouette_cost
+    from studio.fit import FitOptions, SessionInputs, fit_frame, fit_session, observed_masks
+    from studio.render import silhouette
+    from studio.render.pyramid import level_camera
+    from studio.segment import segment_session
+    from studio.simulate import ensure_rendered
+
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--spec", type=Path, default=ROOT / "sample_sequences" / "walk" / "spec.yaml")
+    ap.add_argument("--sequence", type=int, default=20, help="frames of the sequence timing (0: skip)")
+    ap.add_argument("--quick", action="store_true")
+    args = ap.parse_args(argv)
+    options = FitOptions(**QUICK) if args.quick else FitOptions()
+
+    session = ensure_rendered(args.spec, seed=0)
+    n_seq = min(args.sequence, 24)
+    segment_session(session, frames=list(range(max(n_seq, 1))), workers=2)
+    inputs = SessionInputs(session)
+    model = BodyModel.load("female")
+    masks = observed_masks(inputs, 0)
+    cams = inputs.cameras
+    pose = model.default_pose()
+    V = model.vertices(model.mean_shape(), pose)
+    res = {"benchmark": "fit_speed", "options": options.to_dict()}
+    for level in (0, 1, 2):
+        target = SilhouetteTarget.build(masks, level=level, names=[c.name for c in cams])
+        lc = [level_camera(c, level) for c in cams]
+        res[f"render4_level{level}_ms"] = 1000 * _best(lambda lc=lc: [silhouette(c, V, model.faces) for c in lc])
+        sil = [silhouette(c, V, model.faces) for c in lc]
+        res[f"cost4_level{level}_ms"] = 1000 * _best(lambda t=target, s=sil: silhouette_cost(t, s))
+        res[f"render_plus_cost4_level{level}_ms"] = res[f"render4_level{level}_ms"] + res[f"cost4_level{level}_ms"]
+    res["scape_mesh_single_ms"] = 1000 * _best(lambda: model.vertices(model.mean_shape(), pose), 10)
+    B = 16
+    res["scape_mesh_batched_per_body_ms"] = 1000 * _best(
+        lambda: model.vertices_batch(np.zeros((B, model.n_shape)), np.zeros((B, model.pose_size))), 5) / B
+    t = time.perf_counter()
+    fit = fit_frame(model, cams, masks, frame=0, options=options, seed=0)
+    res["single_frame_fit_s"] = time.perf_counter() - t
+    res["single_frame_evaluations"] = fit.n_evaluations
+    res["single_frame_timings"] = fit.timings
+    if n_seq > 0:
+        for workers in (1, 2):
+            tmp = Path(tempfile.mkdtemp(prefix="fit_speed-"))
+            try:
+                copy = tmp / "s"
+                shutil.copytree(session, copy, ignore=shutil.ignore_patterns("fit", "report"))
+                t = time.perf_counter()
+                fit_session(copy, frames=list(range(n_seq)), gender="female", workers=workers, options=options)
+                res[f"sequence{n_seq}_workers{workers}_s"] = time.perf_counter() - t
+            finally:
+                shutil.rmtree(tmp, ignore_errors=True)
+    res["anchors"] = {"render_plus_cost4_level0_ms": "≤ 10 ms", "single_frame_fit_s": "≤ 60 s (thesis ~40 min Matlab)"}
+    out = ROOT / "benchmarks" / "results" / "fit_speed.json"
+    out.parent.mkdir(parents=True, exist_ok=True)
+    out.write_text(json.dumps(res, indent=2) + "\n")
+    print("fit speed — walk sample, 4 cameras 656×490")
+    for k, v in res.items():
+        if isinstance(v, float):
+            print(f"  {k:42s} {v:10.2f}")
+    ok = res["render_plus_cost4_level0_ms"] <= 10
+    print(f"  4-view cost at full resolution: {res['render_plus_cost4_level0_ms']:.1f} ms (anchor ≤ 10 ms: "
+          f"{'OK' if ok else 'MISSED'}); level 2: {res['render_plus_cost4_level2_ms']:.1f} ms")
+    print(f"  single-frame fit: {res['single_frame_fit_s']:.1f} s (anchor ≤ 60 s: "
+          f"{'OK' if res['single_frame_fit_s'] <= 60 else 'MISSED'}; thesis ~40 min)")
+    print(f"wrote {out}")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

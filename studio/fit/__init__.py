@@ -1,0 +1,33 @@
+"""Fitting the body model to multi-view silhouettes (thesis ch. 4).
+
+- :func:`fit_frame` / :func:`fit_frame_gender`: one frame (particle filter, then staged
+  Nelder–Mead, coarse-to-fine pyramid levels), gender given or chosen by the lower cost;
+- :func:`fit_session`: a sequence, frames in parallel processes, shape shared;
+- :mod:`studio.fit.evaluate`: accuracy against a simulated session's truth.
+"""
+
+from studio.fit.errors import FitError
+from studio.fit.frame import FitOptions, FrameFit, fit_frame, fit_frame_gender
+from studio.fit.init import hull_centroid, initial_poses
+from studio.fit.objective import FrameObjective, pose_bounds
+from studio.fit.output import OVERLAY_COLORS, overlay_image, write_frame_fit
+from studio.fit.session import SessionInputs, fit_session, load_fits, observed_masks
+
+__all__ = [
+    "FitError",
+    "FitOptions",
+    "FrameFit",
+    "FrameObjective",
+    "OVERLAY_COLORS",
+    "SessionInputs",
+    "fit_frame",
+    "fit_frame_gender",
+    "fit_session",
+    "hull_centroid",
+    "initial_poses",
+    "load_fits",
+    "observed_masks",
+    "overlay_image",
+    "pose_bounds",
+    "write_frame_fit",
+]

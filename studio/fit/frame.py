@@ -1,0 +1,297 @@
+"""Fitting one frame: particle filter on the pose, then staged Nelder–Mead (thesis §4.7).
+
+1. The observed silhouettes become a pyramid of :class:`~studio.cost.SilhouetteTarget`
+   (coarse level for the search, full resolution for the end, §7.2.3).
+2. Without a previous pose, the root comes from the silhouettes (:mod:`studio.fit.init`).
+3. The annealed particle filter (§4.7.3) searches the pose (shape held) at the coarse level,
+   started from the initial heading hypotheses (or from the previous frame's pose with a
+   smaller spread); then a partitioned pass (Deutscher's partitioned APF) re-searches
+   root + spine + head, the arms and the legs in turn, the others held.
+   Without a given shape, the shape starts from the stature read off the top of the visual
+   hull (:func:`studio.fit.init.hull_height` → :func:`studio.body.shape_from_measurements`).
+4. Staged Nelder–Mead (§4.7.4, :func:`studio.optimize.thesis_stages`) refines root + shape,
+   the limbs outward, then everything, at the middle level; a last root + shape + pose stage
+   runs at full resolution. Joint limits are optimiser bounds, so they always hold.
+"""
+
+from __future__ import annotations
+
+import logging
+import time
+from dataclasses import asdict, dataclass, field
+
+import numpy as np
+
+from studio.body import BodyModel
+from studio.body.skeleton import JOINT_KIND, POSE_SIZE, pose_slices
+from studio.cost import SilhouetteTarget
+from studio.fit.errors import FitError
+from studio.body.inverse import shape_from_measurements
+from studio.fit.init import hull_centroid, hull_height, initial_poses
+from studio.fit.objective import FrameObjective, pose_bounds
+from studio.optimize import Stage, annealed_particle_filter, staged_nelder_mead, thesis_stages
+
+__all__ = ["FitOptions", "FrameFit", "fit_frame", "fit_frame_gender"]
+
+log = logging.getLogger(__name__)
+
+
+@dataclass(frozen=True)
+class FitOptions:
+    """Settings of a single-frame fit (defaults: the ≤ 60 s budget on one core).
+
+    ``levels``: (search, refine, final) pyramid levels. ``n_shape_free``: shape
+    coefficients optimised (by decreasing eigenvalue). ``fit_shape``: False holds the shape.
+    """
+
+    levels: tuple[int, int, int] = (2, 1, 0)
+    tau: float = 20.0
+    xi: float = 1.0
+    n_particles: int = 80
+    n_layers: int = 8
+    n_particles_tracking: int = 48
+    n_layers_tracking: int = 5
+    nm_evaluations: int = 90
+    final_evaluations: int = 120
+    refine_particles: int = 0
+    partition_particles: int = 40
+    tracking_budget: float = 0.5
+    partition_layers: int = 4
+    refine_layers: int = 0
+    n_shape_free: int = 10
+    fit_shape: bool = True
+    prior_weight: float = 1.0
+
+    def to_dict(self) -> dict:
+        return {k: list(v) if isinstance(v, tuple) else v for k, v in asdict(self).items()}
+
+
+@dataclass(frozen=True, eq=False)
+class FrameFit:
+    """Result of one frame: ``shape`` (n_shape,), ``pose`` (POSE_SIZE,), ``joints`` (15, 3),
+    ``costs`` term by term at full resolution, ``timings`` (s) per step."""
+
+    frame: int
+    gender: str
+    shape: np.ndarray
+    pose: np.ndarray
+    joints: np.ndarray
+    costs: dict
+    timings: dict
+    n_evaluations: int
+    settings: dict = field(default_factory=dict)
+
+    def to_json(self) -> dict:
+        return {
+            "format": "studio.fit",
+            "version": 1,
+            "frame": int(self.frame),
+            "gender": self.gender,
+            "shape": [float(v) for v in self.shape],
+            "pose": [float(v) for v in self.pose],
+            "joints": np.round(self.joints, 6).tolist(),
+            "costs": self.costs,
+            "timings": self.timings,
+            "n_evaluations": int(self.n_evaluations),
+            "settings": self.settings,
+        }
+
+    @classmethod
+    def from_json(cls, obj: dict) -> "FrameFit":
+        if obj.get("format") != "studio.fit" or int(obj.get("version", 0)) != 1:
+            raise FitError(f"not a studio.fit version 1 result (format={obj.get('format')!r}, version={obj.get('version')!r})")
+        return cls(
+            frame=int(obj["frame"]), gender=obj["gender"], shape=np.asarray(obj["shape"], float),
+            pose=np.asarray(obj["pose"], float), joints=np.asarray(obj["joints"], float), costs=obj["costs"],
+            timings=obj["timings"], n_evaluations=int(obj["n_evaluations"]), settings=obj.get("settings", {}),
+        )
+
+
+def _part_groups() -> list[list[int]]:
+    """Pose indices grouped from the torso outward (thesis §4.7.4)."""
+    sl = pose_slices()
+    idx = {p: list(range(sl[p].start, sl[p].stop)) for p in range(1, 15)}
+    names = ("pelvis", "torso", "head", "upperarm_l", "lowerarm_l", "hand_l", "upperarm_r", "lowerarm_r",
+             "hand_r", "upperleg_l", "lowerleg_l", "foot_l", "upperleg_r", "lowerleg_r", "foot_r")
+    n = {name: i for i, name in enumerate(names)}
+    return [
+        idx[n["torso"]] + idx[n["upperarm_l"]] + idx[n["upperarm_r"]] + idx[n["upperleg_l"]] + idx[n["upperleg_r"]],
+        idx[n["lowerarm_l"]] + idx[n["lowerarm_r"]] + idx[n["lowerleg_l"]] + idx[n["lowerleg_r"]],
+        idx[n["hand_l"]] + idx[n["hand_r"]] + idx[n["foot_l"]] + idx[n["foot_r"]] + idx[n["head"]],
+    ]
+
+
+def _partitions() -> list[list[int]]:
+    """Pose index groups of the partitioned particle filter: root + spine + head, arms, legs."""
+    sl = pose_slices()
+
+    def idx(*parts):
+        return [i for p in parts for i in range(sl[p].start, sl[p].stop)]
+
+    return [list(range(3)) + idx(0, 1, 2), idx(3, 4, 5, 6, 7, 8), idx(9, 10, 11, 12, 13, 14)]
+
+
+def _pose_sigma(scale: float) -> np.ndarray:
+    """Initial particle spread per pose entry (translation m, angles rad) times ``scale``."""
+    s = np.empty(POSE_SIZE)
+    s[:2], s[2] = 0.06, 0.02
+    s[3:5], s[5] = 0.06, 0.25
+    for p, kind in enumerate(JOINT_KIND):
+        if kind != "root":
+            s[pose_slices()[p]] = 0.25
+    return s * scale
+
+
+def build_targets(masks, names, options: FitOptions) -> dict:
+    return {lvl: SilhouetteTarget.build(masks, tau=options.tau, xi=options.xi, level=lvl, names=names)
+            for lvl in sorted(set(options.levels))}
+
+
+def fit_frame(
+    model: BodyModel,
+    cameras,
+    masks,
+    *,
+    frame: int = 0,
+    shape=None,
+    previous_pose=None,
+    hint_pose=None,
+    options: FitOptions = FitOptions(),
+    seed=0,
+) -> FrameFit:
+    """Fit ``model`` to one frame's observed silhouettes.
+
+    ``cameras`` list of full-resolution cameras, ``masks`` list of (H, W) bool in the same
+    order. ``shape`` (n_shape,) starting/held shape (default: mean). ``previous_pose``
+    (POSE_SIZE,) initialises a tracking fit (smaller spread, fewer layers); without it the
+    pose is initialised from the silhouettes; ``hint_pose`` (e.g. another frame's fitted pose)
+    then joins the heading hypotheses as one more start, moved to the silhouettes' floor
+    centroid. Deterministic for a given ``seed``.
+    """
+    cameras = list(cameras)
+    masks = [np.asarray(m, dtype=bool) for m in masks]
+    if len(cameras) != len(masks) or not cameras:
+        raise FitError(f"need one mask per camera: got {len(masks)} masks for {len(cameras)} cameras")
+    for c, m in zip(cameras, masks, strict=True):
+        if m.shape != (c.size[1], c.size[0]):
+            raise FitError(f"camera {c.name}: mask is {m.shape[1]}x{m.shape[0]}, calibration says {c.size[0]}x{c.size[1]}")
+        if not m.any():
+            raise FitError(f"camera {c.name}: empty silhouette in frame {frame}")
+    rng = np.random.default_rng(seed)
+    t_start = time.perf_counter()
+    timings = {}
+    init_height = None
+    if shape is not None:
+        base_shape = model.check_shape(shape)
+    elif options.fit_shape and model.measurement_samples is not None:
+        # stature from the top of the visual hull → conditional-mean shape (§4.7.2-style init)
+        xy = hull_centroid(cameras, masks)
+        height = hull_height(cameras, masks, xy)
+        base_shape = shape_from_measurements(model, {"stature": height}, refine=0)
+        base_shape = np.clip(base_shape, -2.5 * np.sqrt(model.eigenvalues), 2.5 * np.sqrt(model.eigenvalues))
+        init_height = height
+    else:
+        base_shape = model.mean_shape()
+    search, refine, final = options.levels
+    targets = build_targets(masks, [c.name for c in cameras], options)
+    n_free = options.n_shape_free if options.fit_shape else 0
+    n_free = min(n_free, model.n_shape)
+    pose_obj = FrameObjective(model, cameras, targets, base_shape, 0, options.prior_weight)
+    timings["targets"] = time.perf_counter() - t_start
+
+    # -- initialisation + particle filter on the pose (shape held)
+    t = time.perf_counter()
+    if previous_pose is None:
+        starts, _ = initial_poses(pose_obj, cameras, masks, search)
+        if hint_pose is not None:
+            hint = np.asarray(hint_pose, dtype=np.float64).copy()
+            hint[:2] = starts[0, :2]
+            starts = np.vstack([hint[None], starts])
+        sigma = _pose_sigma(1.0)
+        n_p, n_l = options.n_particles, options.n_layers
+    else:
+        starts = np.asarray(previous_pose, dtype=np.float64)[None]
+        sigma = _pose_sigma(0.4)
+        n_p, n_l = options.n_particles_tracking, options.n_layers_tracking
+    timings["init"] = time.perf_counter() - t
+    t = time.perf_counter()
+    lo, hi = pose_bounds(model, starts[0, :2])
+    starts = np.clip(starts, lo, hi)
+    apf = annealed_particle_filter(
+        lambda X: pose_obj(X, search), starts, sigma, bounds=(lo, hi), n_particles=n_p, n_layers=n_l,
+        vectorized=True, seed=rng,
+    )
+    x_pose = apf.x.copy()
+    # partitioned refinement (Deutscher's partitioned APF): torso+root, arms, legs in turn
+    if options.partition_particles and options.partition_layers:
+        scale = 0.5 if previous_pose is None else 0.3
+        for idx in _partitions():
+            idx = np.asarray(idx)
+
+            def sub(Z, idx=idx, base=x_pose):
+                X = np.repeat(base[None], len(Z), axis=0)
+                X[:, idx] = Z
+                return pose_obj(X, search)
+
+            r = annealed_particle_filter(sub, x_pose[idx], sigma[idx] * scale, bounds=(lo[idx], hi[idx]),
+                                         n_particles=options.partition_particles,
+                                         n_layers=options.partition_layers, vectorized=True, seed=rng)
+            if r.cost < float(pose_obj(x_pose[None], search)[0]):
+                x_pose[idx] = r.x
+    timings["particle_filter"] = time.perf_counter() - t
+
+    # -- staged Nelder–Mead on pose + shape
+    t = time.perf_counter()
+    obj = FrameObjective(model, cameras, targets, base_shape, n_free, options.prior_weight)
+    x0 = obj.pack(base_shape, x_pose)
+    sig = np.sqrt(model.eigenvalues[:n_free])
+    blo = np.concatenate([lo, -3 * sig])
+    bhi = np.concatenate([hi, 3 * sig])
+    if options.refine_particles and options.refine_layers:
+        t2 = time.perf_counter()
+        apf2 = annealed_particle_filter(
+            lambda X: obj(X, refine), x0, np.concatenate([_pose_sigma(0.3), 0.5 * sig]), bounds=(blo, bhi),
+            n_particles=options.refine_particles, n_layers=options.refine_layers, vectorized=True, seed=rng,
+        )
+        x0 = apf2.x
+        timings["particle_filter_refine"] = time.perf_counter() - t2
+    shape_idx = list(range(POSE_SIZE, POSE_SIZE + n_free))
+    stages = thesis_stages(list(range(6)), _part_groups(), shape_idx, n_shape_first=min(6, n_free),
+                           n_shape_second=n_free, max_evaluations=options.nm_evaluations)
+    step = np.concatenate([np.full(POSE_SIZE, 0.08), 0.5 * sig])
+    step[:3] = 0.03
+    if previous_pose is not None:  # tracking: a smaller local budget
+        stages = [Stage(st.indices, max(1, int(st.max_evaluations * options.tracking_budget)), st.name)
+                  for st in stages]
+    nm = staged_nelder_mead(obj.scalar(refine), x0, stages, bounds=(blo, bhi), step=step, adaptive=True)
+    timings["nelder_mead"] = time.perf_counter() - t
+    t = time.perf_counter()
+    last = [Stage(tuple(range(6)) + tuple(shape_idx) + tuple(i for g in _part_groups()[:1] for i in g),
+                  options.final_evaluations, "final")]
+    fin = staged_nelder_mead(obj.scalar(final), nm.x, last, bounds=(blo, bhi), step=step * 0.5, adaptive=True)
+    timings["final"] = time.perf_counter() - t
+    shapes, poses = obj.split(fin.x[None])
+    shape_out, pose_out = shapes[0], model.clip_pose(poses[0])
+    costs = obj.terms(obj.pack(shape_out, pose_out), final)
+    costs["particle_filter_best"] = float(apf.cost)
+    costs["nelder_mead_refine"] = float(nm.cost)
+    if init_height is not None:
+        costs["init_hull_height_m"] = init_height
+    timings["total"] = time.perf_counter() - t_start
+    log.info("frame %d (%s): cost %.3f in %.1f s", frame, model.gender, costs["total"], timings["total"])
+    return FrameFit(
+        frame=int(frame), gender=model.gender, shape=shape_out, pose=pose_out,
+        joints=model.joints(shape_out, pose_out), costs=costs, timings={k: round(v, 4) for k, v in timings.items()},
+        n_evaluations=int(pose_obj.n_evaluations + obj.n_evaluations), settings=options.to_dict(),
+    )
+
+
+def fit_frame_gender(cameras, masks, gender: str = "auto", **kwargs) -> FrameFit:
+    """:func:`fit_frame` with a given gender, or ``"auto"``: fit the female and the male model
+    and keep the lower total cost (thesis §4.7.2)."""
+    if gender != "auto":
+        return fit_frame(BodyModel.load(gender), cameras, masks, **kwargs)
+    fits = [fit_frame(BodyModel.load(g), cameras, masks, **kwargs) for g in ("female", "male")]
+    best = min(fits, key=lambda f: f.costs["total"])
+    best.costs["gender_costs"] = {f.gender: f.costs["total"] for f in fits}
+    return best

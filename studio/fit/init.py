@@ -1,0 +1,101 @@
+"""Initial pose from the silhouettes alone (thesis §4.7.1–4.7.2).
+
+The floor position of the body is the centroid of a coarse visual hull: points of a
+vertical grid of columns that project inside the silhouette in every view that sees them
+(at least two). The heading is then chosen by a coarse search over yaw in the default
+posture, scored with the silhouette cost at a coarse pyramid level; the best few headings
+(the front/back ambiguity of silhouettes makes the opposite heading a likely rival) are
+handed to the particle filter as a mixture of starts.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from studio.fit.errors import FitError
+
+__all__ = ["hull_centroid", "hull_height", "initial_poses", "standing_pose"]
+
+
+def _in_mask(cam, mask: np.ndarray, pts: np.ndarray) -> np.ndarray:
+    """(N,) bool: points in front of ``cam`` projecting inside the image and onto ``mask``.
+
+    Points whose ideal (undistorted) projection leaves the image are rejected too, so the
+    fold-back of the lens model far outside the field of view cannot produce false hits.
+    """
+    h, w = mask.shape
+    uv, _, front = cam.project_points(pts)
+    ideal, _, _ = cam.project_points(pts, distort=False)
+    ok = front & np.isfinite(uv).all(axis=1) & np.isfinite(ideal).all(axis=1)
+    m = 0.25 * max(w, h)
+    ok &= (ideal[:, 0] > -m) & (ideal[:, 0] < w + m) & (ideal[:, 1] > -m) & (ideal[:, 1] < h + m)
+    uv = np.where(ok[:, None], uv, -1.0)
+    u = np.rint(uv[:, 0]).astype(np.int64)
+    v = np.rint(uv[:, 1]).astype(np.int64)
+    ok &= (u >= 0) & (u < w) & (v >= 0) & (v < h)
+    hit = np.zeros(len(pts), dtype=bool)
+    hit[ok] = mask[v[ok], u[ok]]
+    return hit
+
+
+def hull_centroid(cameras, masks, *, extent: float = 3.5, step: float = 0.04,
+                  heights=(0.15, 0.5, 0.9, 1.2, 1.5)) -> np.ndarray:
+    """Floor (x, y) of the visual-hull centroid (2,) from full-resolution ``masks`` (list, camera order).
+
+    Only points seen inside the image of every camera count (the person must be in every view).
+    Raises :class:`FitError` when no grid point falls inside all silhouettes.
+    """
+    g = np.arange(-extent, extent + 1e-9, step)
+    X, Y = np.meshgrid(g, g, indexing="ij")
+    pts = np.stack([np.repeat(X.ravel()[:, None], len(heights), 1).ravel(),
+                    np.repeat(Y.ravel()[:, None], len(heights), 1).ravel(),
+                    np.tile(np.asarray(heights, dtype=float), X.size)], axis=1)
+    inside = np.ones(len(pts), dtype=bool)
+    for cam, mask in zip(cameras, masks, strict=True):
+        inside &= _in_mask(cam, mask, pts)
+    if not inside.any():
+        raise FitError("no point of the floor grid lies inside every silhouette: is the person in view of all cameras?")
+    return pts[inside, :2].mean(axis=0)
+
+
+def standing_pose(model) -> np.ndarray:
+    """The default pose with the arms lowered along the body (a typical standing/walking start)."""
+    from studio.body.skeleton import pose_slices
+
+    sl = pose_slices()
+    pose = model.default_pose()
+    pose[sl[3]] = [0.0, 0.65, 0.0]  # left upper arm down
+    pose[sl[6]] = [0.0, -0.65, 0.0]  # right upper arm down
+    return model.clip_pose(pose)
+
+
+def initial_poses(objective, cameras, masks, level: int, *, n_headings: int = 12, keep: int = 4,
+                  shape=None) -> tuple[np.ndarray, np.ndarray]:
+    """Starts (keep, D) for the particle filter and their costs (keep,), best first."""
+    xy = hull_centroid(cameras, masks)
+    base = standing_pose(objective.model)
+    base[:2] = xy
+    yaws = np.linspace(-np.pi, np.pi, n_headings, endpoint=False)
+    X = np.repeat(objective.pack(objective.base_shape if shape is None else shape, base)[None], n_headings, axis=0)
+    X[:, 5] = yaws
+    costs = objective(X, level)
+    order = np.argsort(costs)[:keep]
+    return X[order], costs[order]
+
+
+def hull_height(cameras, masks, xy, *, radius: float = 0.35, step: float = 0.02, dz: float = 0.01) -> float:
+    """Height (m) of the top of the visual hull within ``radius`` of the floor point ``xy``.
+
+    A first guess of the stature for the shape initialisation (the hull of a few views is
+    slightly larger than the body; the posture of a walk makes the body slightly shorter).
+    """
+    g = np.arange(-radius, radius + 1e-9, step)
+    zs = np.arange(0.5, 2.4, dz)
+    X, Y, Z = np.meshgrid(xy[0] + g, xy[1] + g, zs, indexing="ij")
+    pts = np.stack([X.ravel(), Y.ravel(), Z.ravel()], axis=1)
+    inside = np.ones(len(pts), dtype=bool)
+    for cam, mask in zip(cameras, masks, strict=True):
+        inside &= _in_mask(cam, mask, pts)
+    if not inside.any():
+        raise FitError("the visual hull above the body's floor position is empty: cannot estimate the height")
+    return float(pts[inside, 2].max())

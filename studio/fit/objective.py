@@ -1,0 +1,124 @@
+"""The fitting objective of one frame: silhouettes in every view plus priors (eq. 4.6, 6.7–6.9).
+
+Parameter vector ``x`` (D,) = ``pose`` (POSE_SIZE, see :mod:`studio.body.skeleton`) followed by
+the first ``n_shape_free`` shape coefficients (the rest stay at ``base_shape``).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import numpy as np
+
+from studio.body.skeleton import POSE_SIZE
+from studio.cost import SilhouetteTarget, pose_limit_penalty, shape_prior, silhouette_cost
+from studio.render import silhouette
+from studio.render.pyramid import level_camera
+
+__all__ = ["FrameObjective", "pose_bounds"]
+
+#: Evaluate the SCAPE meshes of at most this many particles in one batch.
+BATCH = 16
+
+
+def pose_bounds(model, root_xy: np.ndarray | None = None, xy_margin: float = 1.0) -> tuple[np.ndarray, np.ndarray]:
+    """Bounds (lo, hi) of the pose vector: joint limits, translation within ``xy_margin`` of
+    ``root_xy`` and between -0.3 and 0.3 m in height (the body stands on the floor)."""
+    lo = model.pose_limits[:, 0].astype(np.float64).copy()
+    hi = model.pose_limits[:, 1].astype(np.float64).copy()
+    if root_xy is not None:
+        lo[:2] = np.asarray(root_xy, dtype=np.float64) - xy_margin
+        hi[:2] = np.asarray(root_xy, dtype=np.float64) + xy_margin
+    lo[2], hi[2] = -0.3, 0.3
+    return lo, hi
+
+
+@dataclass
+class FrameObjective:
+    """Cost of parameter vectors against one frame's observed silhouettes.
+
+    ``cameras`` full-resolution cameras in ``targets[level].names`` order; ``targets``
+    {level: SilhouetteTarget}; ``base_shape`` (n_shape,) the shape whose first
+    ``n_shape_free`` coefficients ``x`` replaces; ``prior_weight`` multiplies the shape
+    prior (eq. 6.8) and the joint-limit penalty (eq. 6.9, first term).
+    """
+
+    model: object
+    cameras: Sequence
+    targets: dict
+    base_shape: np.ndarray
+    n_shape_free: int = 0
+    prior_weight: float = 1.0
+    n_evaluations: int = 0
+
+    def __post_init__(self):
+        self.base_shape = np.asarray(self.base_shape, dtype=np.float64)
+        self._sigma = np.sqrt(np.asarray(self.model.eigenvalues, dtype=np.float64))
+        self._level_cams = {lvl: [level_camera(c, lvl) for c in self.cameras] for lvl in self.targets}
+        self._limits = self.model.pose_limits.astype(np.float64)
+        self._limit_sigma = np.full(POSE_SIZE, 0.05)
+
+    @property
+    def size(self) -> int:
+        return POSE_SIZE + int(self.n_shape_free)
+
+    def split(self, X: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """(N, D) parameters → shapes (N, n_shape), poses (N, POSE_SIZE)."""
+        X = np.atleast_2d(np.asarray(X, dtype=np.float64))
+        shapes = np.repeat(self.base_shape[None], len(X), axis=0)
+        shapes[:, : self.n_shape_free] = X[:, POSE_SIZE:]
+        return shapes, X[:, :POSE_SIZE]
+
+    def pack(self, shape: np.ndarray, pose: np.ndarray) -> np.ndarray:
+        """(D,) parameter vector of a full ``shape`` and ``pose``."""
+        return np.concatenate([np.asarray(pose, dtype=np.float64), np.asarray(shape, dtype=np.float64)[: self.n_shape_free]])
+
+    def meshes(self, X: np.ndarray) -> np.ndarray:
+        shapes, poses = self.split(X)
+        poses = self.model.clip_pose(poses)
+        out = np.empty((len(poses), self.model.n_vertices, 3))
+        for i in range(0, len(poses), BATCH):
+            out[i : i + BATCH] = self.model.vertices_batch(shapes[i : i + BATCH], poses[i : i + BATCH])
+        return out
+
+    def masks(self, vertices: np.ndarray, level: int) -> list[np.ndarray]:
+        """Model silhouettes (H_l, W_l) bool of one mesh in every camera at ``level``."""
+        return [silhouette(c, vertices, self.model.faces) for c in self._level_cams[level]]
+
+    def priors(self, X: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        shapes, poses = self.split(X)
+        sp = np.atleast_1d(shape_prior(shapes, self._sigma))
+        lp = np.atleast_1d(pose_limit_penalty(poses, self._limits[:, 0], self._limits[:, 1], self._limit_sigma))
+        return sp, lp
+
+    def __call__(self, X: np.ndarray, level: int) -> np.ndarray:
+        """Total cost (N,) of parameter vectors (N, D) at pyramid ``level`` (full-res units)."""
+        X = np.atleast_2d(np.asarray(X, dtype=np.float64))
+        target: SilhouetteTarget = self.targets[level]
+        V = self.meshes(X)
+        sp, lp = self.priors(X)
+        out = np.empty(len(X))
+        for i, v in enumerate(V):
+            out[i] = silhouette_cost(target, self.masks(v, level)).total
+        self.n_evaluations += len(X)
+        return out + self.prior_weight * (sp + lp)
+
+    def scalar(self, level: int):
+        """``f(x) -> float`` at ``level`` for Nelder–Mead."""
+        return lambda x: float(self(x[None], level)[0])
+
+    def terms(self, x: np.ndarray, level: int = 0) -> dict:
+        """Term-by-term costs of one parameter vector (for the results file)."""
+        x = np.asarray(x, dtype=np.float64)
+        V = self.meshes(x[None])[0]
+        sc = silhouette_cost(self.targets[level], self.masks(V, level))
+        sp, lp = self.priors(x[None])
+        return {
+            "silhouette": float(sc.total),
+            "silhouette_per_view": {n: float(a + b) for n, a, b in zip(sc.names, sc.model_to_observed, sc.observed_to_model)},
+            "shape_prior": float(sp[0]),
+            "pose_limits": float(lp[0]),
+            "total": float(sc.total + self.prior_weight * (sp[0] + lp[0])),
+            "level": int(level),
+        }

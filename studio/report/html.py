@@ -1,0 +1,162 @@
+"""``report/index.html`` of a fitted session: self-contained (images as base64 PNG)."""
+
+from __future__ import annotations
+
+import html
+import json
+import logging
+import time
+from pathlib import Path
+
+import numpy as np
+
+from studio.fit.errors import FitError
+
+__all__ = ["write_report"]
+
+log = logging.getLogger(__name__)
+
+REPORT_DIR = "report"
+
+
+def _cost_figure(fits: dict) -> str:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from studio.report.views import figure_base64
+
+    frames = sorted(fits)
+    fig, ax = plt.subplots(figsize=(6.5, 3))
+    tot = [fits[f].costs["total"] for f in frames]
+    ax.plot(frames, tot, "o-", color="k", label="total")
+    views = sorted(fits[frames[0]].costs.get("silhouette_per_view", {}))
+    for v in views:
+        ax.plot(frames, [fits[f].costs["silhouette_per_view"][v] for f in frames], ".--", label=v)
+    ax.set_xlabel("frame")
+    ax.set_ylabel("cost (eq. 4.6, full-res px)")
+    ax.grid(alpha=0.3)
+    ax.legend(fontsize=7, ncol=3)
+    return figure_base64(fig)
+
+
+def _measurement_figure(table: dict) -> str:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from studio.report.views import figure_base64
+
+    names = [n for n in table if table[n]["unit"] == "mm"]
+    fig, ax = plt.subplots(figsize=(6.5, 3))
+    for i, n in enumerate(names):
+        vals = np.array(list(table[n]["per_frame"].values()))
+        ax.plot(np.full(len(vals), i), vals - table[n]["mean"], "o", color="C0", alpha=0.6)
+        if table[n]["truth"] is not None:
+            ax.plot(i, table[n]["truth"] - table[n]["mean"], "x", color="C3", ms=9)
+    ax.axhline(0, color="k", lw=0.6)
+    ax.set_xticks(range(len(names)), [n.replace("_", " ") for n in names], rotation=35, ha="right", fontsize=8)
+    ax.set_ylabel("per-frame value − mean (mm)\n× = truth")
+    ax.grid(alpha=0.3)
+    return figure_base64(fig)
+
+
+def _table_html(table: dict) -> str:
+    has_truth = any(r["truth"] is not None for r in table.values())
+    head = "<tr><th>measurement</th><th>mean ± std over frames</th>"
+    head += "<th>truth</th><th>error</th>" if has_truth else ""
+    rows = [head + "</tr>"]
+    for name, r in table.items():
+        u = r["unit"]
+        row = f"<tr><td>{html.escape(name.replace('_', ' '))}</td><td>{r['mean']:.1f} ± {r['std']:.1f} {u}</td>"
+        if has_truth:
+            row += ("<td>–</td><td>–</td>" if r["truth"] is None
+                    else f"<td>{r['truth']:.1f} {u}</td><td>{r['error']:+.1f} {u}</td>")
+        rows.append(row + "</tr>")
+    return "<table>" + "".join(rows) + "</table>"
+
+
+def write_report(session_path, *, max_overlay_frames: int = 6, extra: dict | None = None) -> Path:
+    """Write ``report/index.html``, ``report/measurements.json`` and ``.csv`` for a fitted session.
+
+    ``extra`` {title: text} adds plain-text notes (e.g. what the demo did not do). Raises
+    :class:`~studio.fit.FitError` when the session has no fit results.
+    """
+    from rigs.imageio import read_image
+    from studio.body import BodyModel
+    from studio.fit import OVERLAY_COLORS, load_fits
+    from studio.report.measurements import load_truth, measurement_table, write_measurements
+    from studio.report.views import body_views, png_base64
+
+    t0 = time.perf_counter()
+    session_path = Path(session_path)
+    if not session_path.is_dir():
+        raise FitError(f"{session_path}: no such session folder")
+    fits = load_fits(session_path)
+    genders = {f.gender for f in fits.values()}
+    gender = sorted(genders)[0]
+    model = BodyModel.load(gender)
+    truth = load_truth(session_path)
+    table = measurement_table(model, fits, truth)
+    out = session_path / REPORT_DIR
+    write_measurements(out, table)
+    frames = sorted(fits)
+    shape = np.mean([fits[f].shape for f in frames], axis=0)
+    rest = body_views(model.vertices(shape), model.faces)
+    posed = body_views(model.vertices(fits[frames[0]].shape, fits[frames[0]].pose), model.faces, azimuths=(0, 45, 90))
+    seq = {}
+    sp = session_path / "fit" / "sequence.json"
+    if sp.is_file():
+        seq = json.loads(sp.read_text())
+    step = max(1, int(np.ceil(len(frames) / max_overlay_frames)))
+    overlay_rows = []
+    for f in frames[::step]:
+        fdir = session_path / "fit" / "overlay"
+        imgs = []
+        if fdir.is_dir():
+            for cam_dir in sorted(p for p in fdir.iterdir() if p.is_dir()):
+                p = cam_dir / f"{f:06d}.png"
+                if p.is_file():
+                    im = read_image(p)
+                    imgs.append(f'<img src="{png_base64(im[::2, ::2])}" title="{cam_dir.name}">')
+        c = fits[f].costs
+        overlay_rows.append(f"<h3>frame {f} — cost {c['total']:.2f}</h3><div class='row'>{''.join(imgs)}</div>")
+    legend = " ".join(
+        f"<span class='sw' style='background:rgb{tuple(col)}'></span>{html.escape(name)}"
+        for name, col in OVERLAY_COLORS.items()
+    )
+    timing = np.mean([fits[f].timings.get("total", np.nan) for f in frames])
+    notes = "".join(f"<h3>{html.escape(k)}</h3><pre>{html.escape(v)}</pre>" for k, v in (extra or {}).items())
+    page = f"""<!doctype html><html><head><meta charset="utf-8"><title>Body fit report — {html.escape(session_path.name)}</title>
+<style>body{{font-family:sans-serif;max-width:1100px;margin:auto;padding:1em}} table{{border-collapse:collapse}}
+td,th{{border:1px solid #ccc;padding:3px 8px;text-align:right}} img{{margin:2px;max-width:100%}}
+.sw{{display:inline-block;width:1em;height:1em;margin:0 4px 0 12px;vertical-align:middle;border:1px solid #888}}
+.row{{display:flex;flex-wrap:wrap}}</style></head><body>
+<h1>Body shape and pose from silhouettes</h1>
+<p>Session <code>{html.escape(str(session_path))}</code>: {len(frames)} fitted frame(s) ({html.escape(str(frames[0]))}…{html.escape(str(frames[-1]))}),
+model <b>{html.escape(gender)}</b>{' (chosen by lower cost: ' + html.escape(json.dumps(seq.get('gender_costs'))) + ')' if seq.get('gender_costs') else ''};
+mean fit time {timing:.1f} s per frame. Thesis ch. 4: annealed particle filter on the pose, staged Nelder–Mead on pose and shape,
+silhouette cost eq. 4.6 with coarse-to-fine pyramid levels.</p>
+<h2>Measurements</h2>
+<p>From the fitted shape of every frame (lengths in mm, rest pose; arm span in a T-pose).
+Spread = standard deviation over frames (thesis §4.8.6).{' Truth: the simulated person (Anny anthropometry).' if truth else ''}</p>
+{_table_html(table)}
+<img src="{_measurement_figure(table)}">
+<h2>Cost per frame</h2><img src="{_cost_figure(fits)}">
+<h2>Fitted body</h2><p>Mean shape over frames, rest pose, front / left / back / right:</p><img src="{png_base64(rest)}">
+<p>Frame {frames[0]}, fitted pose:</p><img src="{png_base64(posed)}">
+<h2>Overlays</h2><p>Legend: {legend}. One image per camera (half resolution).</p>
+{''.join(overlay_rows)}
+{notes}
+<p style="color:#777">Generated {time.strftime('%Y-%m-%d %H:%M:%S')} by <code>studio report</code>.</p>
+</body></html>"""
+    p = out / "index.html"
+    tmp = p.with_name(p.name + ".tmp")
+    tmp.write_text(page, encoding="utf-8")
+    import os
+
+    os.replace(tmp, p)
+    log.info("report written to %s in %.1f s", p, time.perf_counter() - t0)
+    return p

@@ -1,0 +1,77 @@
+"""Measurement table of a fitted session (thesis §4.8.6): per-frame values, mean ± std, truth."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+
+__all__ = ["REPORTED", "measurement_table", "write_measurements"]
+
+#: Measurements reported, in order (names of :func:`studio.body.measure`).
+REPORTED = ("stature", "arm_span", "shoulder_breadth", "chest_circumference", "waist_circumference",
+            "hip_circumference", "inseam", "arm_length", "mass")
+
+
+def measurement_table(model, fits: dict, truth: dict | None = None) -> dict:
+    """{name: {"per_frame": {frame: value}, "mean", "std", "unit", "truth", "error"}}.
+
+    Lengths in millimetres, mass in kilograms. ``fits`` {frame: FrameFit}; ``truth`` the
+    session's ``truth/measurements.json`` (metres, kg) or None; ``error`` = mean − truth.
+    """
+    from studio.body import measure
+
+    per = {f: measure(model, fit.shape) for f, fit in sorted(fits.items())}
+    out = {}
+    for name in REPORTED:
+        scale, unit = (1.0, "kg") if name == "mass" else (1000.0, "mm")
+        vals = np.array([per[f][name] for f in per]) * scale
+        row = {
+            "unit": unit,
+            "per_frame": {str(f): float(per[f][name] * scale) for f in per},
+            "mean": float(vals.mean()),
+            "std": float(vals.std(ddof=1)) if len(vals) > 1 else 0.0,
+            "truth": None,
+            "error": None,
+        }
+        if truth is not None and name in truth and truth[name] is not None:
+            row["truth"] = float(truth[name]) * scale
+            row["error"] = row["mean"] - row["truth"]
+        out[name] = row
+    return out
+
+
+def write_measurements(folder: Path, table: dict) -> tuple[Path, Path]:
+    """``measurements.json`` and ``measurements.csv`` (name, unit, mean, std, truth, error, per-frame)."""
+    import csv
+    import io
+    import os
+
+    from rigs.imageio import atomic_write_json
+
+    folder = Path(folder)
+    folder.mkdir(parents=True, exist_ok=True)
+    jp = atomic_write_json(folder / "measurements.json", {"format": "studio.measurements", "version": 1,
+                                                           "measurements": table})
+    frames = sorted({f for row in table.values() for f in row["per_frame"]}, key=int)
+    buf = io.StringIO()
+    w = csv.writer(buf)
+    w.writerow(["name", "unit", "mean", "std", "truth", "error"] + [f"frame_{f}" for f in frames])
+    for name, row in table.items():
+        fmt = (lambda v: "" if v is None else f"{v:.2f}")
+        w.writerow([name, row["unit"], fmt(row["mean"]), fmt(row["std"]), fmt(row["truth"]), fmt(row["error"])]
+                   + [fmt(row["per_frame"].get(f)) for f in frames])
+    cp = folder / "measurements.csv"
+    tmp = cp.with_name(cp.name + ".tmp")
+    with open(tmp, "w", newline="") as fh:
+        fh.write(buf.getvalue())
+        fh.flush()
+        os.fsync(fh.fileno())
+    os.replace(tmp, cp)
+    return Path(jp), cp
+
+
+def load_truth(session_path) -> dict | None:
+    p = Path(session_path) / "truth" / "measurements.json"
+    return json.loads(p.read_text()) if p.is_file() else None

@@ -1,0 +1,133 @@
+"""Single-frame fitting (thesis §4.7) on clean synthetic silhouettes of our own model."""
+
+import numpy as np
+import pytest
+
+from calibration import Camera
+from studio.body import BodyModel
+from studio.fit import FitError, FitOptions, FrameFit, fit_frame, fit_frame_gender, hull_centroid
+from studio.fit.evaluate import joint_error, silhouette_agreement, surface_distance
+from studio.fit.output import OVERLAY_COLORS, overlay_image
+from studio.render import silhouette
+
+SMALL = FitOptions(levels=(2, 1, 0), n_particles=40, n_layers=5, nm_evaluations=30, final_evaluations=40,
+                   n_shape_free=3)
+
+
+def ring_cameras(n=4, size=(328, 246), radius=3.6, height=2.3, focal=280.0):
+    """``n`` cameras on a circle looking at (0, 0, 0.9)."""
+    cams = []
+    w, h = size
+    for k in range(n):
+        a = np.pi / 4 + 2 * np.pi * k / n
+        eye = np.array([radius * np.cos(a), radius * np.sin(a), height])
+        z = np.array([0, 0, 0.9]) - eye
+        z /= np.linalg.norm(z)
+        x = np.cross(z, [0, 0, 1.0])
+        x /= np.linalg.norm(x)
+        R = np.stack([x, np.cross(z, x), z])
+        K = np.array([[focal, 0, (w - 1) / 2], [0, focal, (h - 1) / 2], [0, 0, 1]])
+        cams.append(Camera(name=f"cam{k}", K=K, dist=np.zeros(5), R=R, t=-R @ eye, size=size))
+    return cams
+
+
+def true_body(model):
+    from studio.body.skeleton import pose_slices
+    from studio.fit.init import standing_pose
+
+    sl = pose_slices()
+    shape = model.mean_shape()
+    shape[0] = 0.8 * np.sqrt(model.eigenvalues[0])
+    pose = standing_pose(model)
+    pose[:3] = [0.15, -0.1, 0.0]
+    pose[5] = 0.5  # heading
+    pose[sl[3]] += [0.25, 0.0, 0.0]  # left arm swings
+    pose[sl[9]] = [0.3, 0.0, 0.0]  # left thigh forward
+    pose[sl[10]] = [0.3]  # left knee
+    return shape, model.clip_pose(pose)
+
+
+@pytest.fixture(scope="module")
+def scene():
+    model = BodyModel.load("female")
+    cams = ring_cameras()
+    shape, pose = true_body(model)
+    V = model.vertices(shape, pose)
+    masks = [silhouette(c, V, model.faces) for c in cams]
+    return model, cams, shape, pose, V, masks
+
+
+def test_hull_centroid_finds_the_body_on_the_floor(scene):
+    model, cams, shape, pose, V, masks = scene
+    xy = hull_centroid(cams, masks, step=0.03)
+    assert np.linalg.norm(xy - pose[:2]) < 0.05
+
+
+def test_fit_recovers_the_true_pose_and_shape(scene):
+    model, cams, shape, pose, V, masks = scene
+    fit = fit_frame(model, cams, masks, options=SMALL, seed=1)
+    Vf = model.vertices(fit.shape, fit.pose)
+    err, _ = joint_error(model, Vf, V)
+    # small images (328×246, the coarse search at 82×62) and a tiny budget: a few centimetres
+    assert err < 0.05, f"mean joint error {err * 1000:.0f} mm"
+    assert surface_distance(Vf, model.faces, V, model.faces, n=8000) < 0.025
+    prec, rec = silhouette_agreement([silhouette(c, Vf, model.faces) for c in cams], masks)
+    assert prec > 0.88 and rec > 0.88, (prec, rec)
+    assert abs(np.angle(np.exp(1j * (fit.pose[5] - pose[5])))) < 0.3
+    # the result is inside the joint limits and records its costs and timings
+    model.check_pose(fit.pose)
+    assert fit.costs["total"] == pytest.approx(fit.costs["silhouette"] + fit.costs["shape_prior"]
+                                               + fit.costs["pose_limits"])
+    assert fit.timings["total"] > 0 and fit.n_evaluations > 200
+
+
+def test_fit_is_deterministic_under_a_seed(scene):
+    model, cams, shape, pose, V, masks = scene
+    opts = FitOptions(levels=(2, 2, 1), n_particles=12, n_layers=2, nm_evaluations=5, final_evaluations=5,
+                      n_particles_tracking=12, n_layers_tracking=2, partition_particles=8, partition_layers=1,
+                      n_shape_free=2)
+    a = fit_frame(model, cams, masks, options=opts, seed=7)
+    b = fit_frame(model, cams, masks, options=opts, seed=7)
+    np.testing.assert_array_equal(a.pose, b.pose)
+    np.testing.assert_array_equal(a.shape, b.shape)
+    round_trip = type(a).from_json(a.to_json())
+    np.testing.assert_allclose(round_trip.pose, a.pose)
+    # tracking from the true pose stays there (smaller spread, no silhouette initialisation)
+    track = fit_frame(model, cams, masks, options=opts, seed=7, previous_pose=pose, shape=shape)
+    assert joint_error(model, model.vertices(track.shape, track.pose), V)[0] < 0.03
+
+
+def test_gender_auto_keeps_the_lower_cost(scene):
+    model, cams, shape, pose, V, masks = scene
+    opts = FitOptions(levels=(2, 2, 2), n_particles=8, n_layers=1, nm_evaluations=3, final_evaluations=3,
+                      n_shape_free=1, partition_particles=4, partition_layers=1)
+    fit = fit_frame_gender(cams, masks, "auto", options=opts, seed=0)
+    costs = fit.costs["gender_costs"]
+    assert set(costs) == {"female", "male"}
+    assert fit.costs["total"] == min(costs.values())
+    assert fit.gender == min(costs, key=costs.get)
+
+
+def test_bad_inputs_raise_clear_errors(scene):
+    model, cams, shape, pose, V, masks = scene
+    with pytest.raises(FitError, match="one mask per camera"):
+        fit_frame(model, cams, masks[:2], options=SMALL)
+    with pytest.raises(FitError, match="cam1: empty silhouette"):
+        fit_frame(model, cams, [masks[0], np.zeros_like(masks[1])] + masks[2:], options=SMALL)
+    with pytest.raises(FitError, match="cam0: mask is 10x5"):
+        fit_frame(model, cams, [np.ones((5, 10), bool)] + masks[1:], options=SMALL)
+    with pytest.raises(FitError, match="inside every silhouette"):
+        hull_centroid(cams, [np.zeros_like(m) for m in masks])
+    with pytest.raises(FitError, match="version 1"):
+        FrameFit.from_json({"format": "other"})
+
+
+def test_overlay_colours():
+    img = np.full((2, 2, 3), 200, np.uint8)
+    model = np.array([[1, 1], [0, 0]], bool)
+    obs = np.array([[1, 0], [1, 0]], bool)
+    out = overlay_image(img, model, obs)
+    assert tuple(out[0, 0]) == OVERLAY_COLORS["agreement"]
+    assert tuple(out[0, 1]) == OVERLAY_COLORS["model only"]
+    assert tuple(out[1, 0]) == OVERLAY_COLORS["image only"]
+    assert tuple(out[1, 1]) == (90, 90, 90)

@@ -1,0 +1,124 @@
+"""Session fitting, ``studio fit`` / ``studio report`` end to end on a tiny synthetic session."""
+
+import json
+
+import numpy as np
+import pytest
+
+from calibration import Camera, RigCalibration
+from rigs.imageio import write_image
+from rigs.session import SessionWriter
+from studio.body import BodyModel
+from studio.cli import main
+from studio.fit import FitError, FitOptions, SessionInputs, fit_session, load_fits
+from studio.render import silhouette
+
+
+def _cameras(size=(164, 124), focal=140.0):
+    cams = []
+    w, h = size
+    for k in range(3):
+        a = np.pi / 4 + 2 * np.pi * k / 3
+        eye = np.array([3.6 * np.cos(a), 3.6 * np.sin(a), 2.3])
+        z = np.array([0, 0, 0.9]) - eye
+        z /= np.linalg.norm(z)
+        x = np.cross(z, [0, 0, 1.0])
+        x /= np.linalg.norm(x)
+        R = np.stack([x, np.cross(z, x), z])
+        K = np.array([[focal, 0, (w - 1) / 2], [0, focal, (h - 1) / 2], [0, 0, 1]])
+        cams.append(Camera(name=f"cam{k}", K=K, dist=np.zeros(5), R=R, t=-R @ eye, size=size))
+    return cams
+
+
+def make_session(path, *, calibration=True, segmentation=True, n_frames=2):
+    """A tiny session: our own female body walking 5 cm per frame, labels = true silhouettes."""
+    model = BodyModel.load("female")
+    cams = _cameras()
+    calib_file = path.parent / f"{path.name}-calibration.json"
+    RigCalibration(cameras={c.name: c for c in cams}).save(calib_file)
+    writer = SessionWriter.create(path, [c.name for c in cams], rig="test",
+                                  calibration=calib_file if calibration else None)
+    poses = []
+    for i in range(n_frames):
+        pose = model.default_pose()
+        pose[:2] = [0.05 * i, 0.0]
+        pose[5] = 0.3
+        poses.append(pose)
+        V = model.vertices(model.mean_shape(), pose)
+        masks = [silhouette(c, V, model.faces) for c in cams]
+        writer.write_frame(i, {c.name: np.where(m[..., None], 180, 60).astype(np.uint8).repeat(3, 2)
+                               for c, m in zip(cams, masks, strict=True)})
+        if segmentation:
+            for c, m in zip(cams, masks, strict=True):
+                p = path / "segmentation" / c.name / f"{i:06d}.png"
+                p.parent.mkdir(parents=True, exist_ok=True)
+                write_image(p, m.astype(np.uint8))
+    writer.close()
+    return model, cams, poses
+
+
+TINY = FitOptions(levels=(2, 1, 0), n_particles=16, n_layers=3, n_particles_tracking=12, n_layers_tracking=2,
+                  nm_evaluations=8, final_evaluations=10, n_shape_free=2, partition_particles=8, partition_layers=2)
+
+
+def test_missing_segmentation_or_calibration_is_named(tmp_path, capsys):
+    make_session(tmp_path / "noseg", segmentation=False, n_frames=1)
+    with pytest.raises(FitError, match=r"no segmentation/ folder — run `studio segment"):
+        SessionInputs(tmp_path / "noseg")
+    assert main(["fit", str(tmp_path / "noseg")]) == 1
+    err = capsys.readouterr().err
+    assert "studio segment" in err and len(err.strip().splitlines()) == 1
+    make_session(tmp_path / "nocal", calibration=False, n_frames=1)
+    with pytest.raises(FitError, match="no calibration.json"):
+        SessionInputs(tmp_path / "nocal")
+    with pytest.raises(FitError, match="no such session folder"):
+        SessionInputs(tmp_path / "absent")
+
+
+def test_fit_session_checks_frames_and_arguments(tmp_path):
+    make_session(tmp_path / "s", n_frames=1)
+    with pytest.raises(FitError, match="frame 5 is not a complete frame"):
+        fit_session(tmp_path / "s", frames=[5], gender="female")
+    with pytest.raises(FitError, match="gender"):
+        fit_session(tmp_path / "s", gender="robot")
+    with pytest.raises(FitError, match="workers"):
+        fit_session(tmp_path / "s", workers=0)
+    (tmp_path / "s" / "segmentation" / "cam1" / "000000.png").unlink()
+    with pytest.raises(FitError, match="missing segmentation of frame 0"):
+        fit_session(tmp_path / "s", frames=[0], gender="female")
+    with pytest.raises(FitError, match="no fit/ folder"):
+        load_fits(tmp_path / "s")
+
+
+def test_fit_session_writes_results_and_tracks(tmp_path):
+    model, cams, poses = make_session(tmp_path / "s", n_frames=2)
+    summary = fit_session(tmp_path / "s", gender="female", options=TINY, seed=0)
+    assert summary["frames"] == [0, 1] and summary["gender"] == "female"
+    fits = load_fits(tmp_path / "s")
+    for f, fit in fits.items():
+        # even a tiny budget lands the root near the truth
+        assert np.linalg.norm(fit.pose[:2] - poses[f][:2]) < 0.08
+        d = json.loads((tmp_path / "s" / "fit" / f"{f:06d}.json").read_text())
+        assert set(d["overlays"]) == {"cam0", "cam1", "cam2"}
+        assert (tmp_path / "s" / "fit" / d["overlays"]["cam0"]).is_file()
+        assert (tmp_path / "s" / "fit" / f"{f:06d}.ply").is_file()
+        assert d["silhouette_agreement"]["cam0"]["recall"] > 0.6
+    seq = json.loads((tmp_path / "s" / "fit" / "sequence.json").read_text())
+    np.testing.assert_allclose(seq["shape"], np.mean([fits[0].shape, fits[1].shape], axis=0))
+
+
+def test_cli_fit_then_report(tmp_path, capsys, monkeypatch):
+    import studio.cli.commands.fit as fit_cmd
+
+    make_session(tmp_path / "s", n_frames=1)
+    monkeypatch.setattr(fit_cmd, "QUICK", {k: v for k, v in TINY.to_dict().items() if k != "levels"})
+    assert main(["fit", str(tmp_path / "s"), "--frames", "0", "--gender", "female", "--quick"]) == 0
+    assert "fitted 1 frame(s) with the female model" in capsys.readouterr().out
+    assert main(["report", str(tmp_path / "s")]) == 0
+    html = (tmp_path / "s" / "report" / "index.html").read_text()
+    assert "Measurements" in html and "data:image/png;base64," in html and "model only" in html
+    table = json.loads((tmp_path / "s" / "report" / "measurements.json").read_text())["measurements"]
+    assert 1400 < table["stature"]["mean"] < 2000 and table["stature"]["unit"] == "mm"
+    csv = (tmp_path / "s" / "report" / "measurements.csv").read_text().splitlines()
+    assert csv[0].startswith("name,unit,mean,std,truth,error") and len(csv) == 10
+    assert main(["report", str(tmp_path / "absent")]) == 1

@@ -42,6 +42,7 @@ def main(argv=None) -> int:
     from studio.fit import FitOptions, SessionInputs, fit_frame, fit_session, observed_masks
     from studio.render import silhouette
     from studio.render.pyramid import level_camera
+    from studio.render.spans import silhouettes_contour
     from studio.segment import segment_session
     from studio.simulate import ensure_rendered
 
@@ -65,10 +66,23 @@ def main(argv=None) -> int:
     for level in (0, 1, 2):
         target = SilhouetteTarget.build(masks, level=level, names=[c.name for c in cams])
         lc = [level_camera(c, level) for c in cams]
-        res[f"render4_level{level}_ms"] = 1000 * _best(lambda lc=lc: [silhouette(c, V, model.faces) for c in lc])
-        sil = [silhouette(c, V, model.faces) for c in lc]
+        # reference renderer (per camera, front-face test + bucketed pixel-centre sampling)
+        res[f"render4_reference_level{level}_ms"] = 1000 * _best(lambda lc=lc: [silhouette(c, V, model.faces) for c in lc])
+        # the fitter's renderer (occluding contour + scanline winding fill, same masks)
+        res[f"render4_level{level}_ms"] = 1000 * _best(lambda lc=lc: silhouettes_contour(lc, V, model.faces))
+        sil = silhouettes_contour(lc, V, model.faces)
+        res[f"render_mismatch_pixels_level{level}"] = int(sum(
+            np.count_nonzero(a != b) for a, b in zip(sil, [silhouette(c, V, model.faces) for c in lc])))
         res[f"cost4_level{level}_ms"] = 1000 * _best(lambda t=target, s=sil: silhouette_cost(t, s))
         res[f"render_plus_cost4_level{level}_ms"] = res[f"render4_level{level}_ms"] + res[f"cost4_level{level}_ms"]
+    from studio.fit.frame import build_targets
+    from studio.fit.objective import CylinderObjective, FrameObjective
+
+    tg = build_targets(masks, [c.name for c in cams], options)
+    Xb = np.repeat(np.concatenate([pose])[None], 32, axis=0)
+    for name, cls in (("scape", FrameObjective), ("cylinder", CylinderObjective)):
+        o = cls(model, cams, tg, model.mean_shape())
+        res[f"objective_{name}_level{options.levels[0]}_per_eval_ms"] = 1000 * _best(lambda o=o: o(Xb, options.levels[0]), 5) / 32
     res["scape_mesh_single_ms"] = 1000 * _best(lambda: model.vertices(model.mean_shape(), pose), 10)
     B = 16
     res["scape_mesh_batched_per_body_ms"] = 1000 * _best(

@@ -28,7 +28,7 @@ from studio.cost import SilhouetteTarget
 from studio.fit.errors import FitError
 from studio.body.inverse import shape_from_measurements
 from studio.fit.init import hull_centroid, hull_height, initial_poses
-from studio.fit.objective import FrameObjective, pose_bounds
+from studio.fit.objective import CylinderObjective, FrameObjective, pose_bounds
 from studio.optimize import Stage, annealed_particle_filter, staged_nelder_mead, thesis_stages
 
 __all__ = ["FitOptions", "FrameFit", "fit_frame", "fit_frame_gender"]
@@ -42,6 +42,9 @@ class FitOptions:
 
     ``levels``: (search, refine, final) pyramid levels. ``n_shape_free``: shape
     coefficients optimised (by decreasing eigenvalue). ``fit_shape``: False holds the shape.
+    ``search_model``: the body the initialisation and the particle filters score — ``"scape"``
+    or ``"cylinder"`` (the 15-cone model of §4.8.1 sized from the starting shape; the staged
+    Nelder–Mead always refines the SCAPE model).
     """
 
     levels: tuple[int, int, int] = (2, 1, 0)
@@ -61,6 +64,11 @@ class FitOptions:
     n_shape_free: int = 10
     fit_shape: bool = True
     prior_weight: float = 1.0
+    search_model: str = "scape"
+
+    def __post_init__(self):
+        if self.search_model not in ("scape", "cylinder"):
+            raise FitError(f"search_model: expected 'scape' or 'cylinder', got {self.search_model!r}")
 
     def to_dict(self) -> dict:
         return {k: list(v) if isinstance(v, tuple) else v for k, v in asdict(self).items()}
@@ -196,7 +204,8 @@ def fit_frame(
     targets = build_targets(masks, [c.name for c in cameras], options)
     n_free = options.n_shape_free if options.fit_shape else 0
     n_free = min(n_free, model.n_shape)
-    pose_obj = FrameObjective(model, cameras, targets, base_shape, 0, options.prior_weight)
+    search_cls = CylinderObjective if options.search_model == "cylinder" else FrameObjective
+    pose_obj = search_cls(model, cameras, targets, base_shape, 0, options.prior_weight)
     timings["targets"] = time.perf_counter() - t_start
 
     # -- initialisation + particle filter on the pose (shape held)

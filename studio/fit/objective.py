@@ -13,10 +13,10 @@ import numpy as np
 
 from studio.body.skeleton import POSE_SIZE
 from studio.cost import SilhouetteTarget, pose_limit_penalty, shape_prior, silhouette_cost
-from studio.render import silhouette
+from studio.render.spans import silhouettes_contour
 from studio.render.pyramid import level_camera
 
-__all__ = ["FrameObjective", "pose_bounds"]
+__all__ = ["CylinderObjective", "FrameObjective", "pose_bounds"]
 
 #: Evaluate the SCAPE meshes of at most this many particles in one batch.
 BATCH = 16
@@ -83,8 +83,14 @@ class FrameObjective:
         return out
 
     def masks(self, vertices: np.ndarray, level: int) -> list[np.ndarray]:
-        """Model silhouettes (H_l, W_l) bool of one mesh in every camera at ``level``."""
-        return [silhouette(c, vertices, self.model.faces) for c in self._level_cams[level]]
+        """Model silhouettes (H_l, W_l) bool of one mesh in every camera at ``level``
+        (the contour scanline renderer: same masks as :func:`studio.render.silhouette`)."""
+        return silhouettes_contour(self._level_cams[level], vertices, self.faces)
+
+    @property
+    def faces(self) -> np.ndarray:
+        """(F, 3) faces of the meshes :meth:`meshes` returns."""
+        return self.model.faces
 
     def priors(self, X: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         shapes, poses = self.split(X)
@@ -122,3 +128,59 @@ class FrameObjective:
             "total": float(sc.total + self.prior_weight * (sp[0] + lp[0])),
             "level": int(level),
         }
+
+
+@dataclass
+class CylinderObjective(FrameObjective):
+    """:class:`FrameObjective` of the coarse cylinder model (thesis §4.8.1, 15 truncated cones
+    sized from ``base_shape``): the same pose vector, silhouette cost and priors, a ~20× smaller
+    mesh. The shape is held (``n_shape_free`` must be 0)."""
+
+    sides: int = 12
+
+    def __post_init__(self):
+        from studio.body import CylinderModel
+        from studio.fit.cones import cone_faces
+
+        super().__post_init__()
+        if self.n_shape_free:
+            raise ValueError(f"CylinderObjective: the shape is held, got n_shape_free={self.n_shape_free}")
+        self.cylinder = CylinderModel.from_shape(self.model, self.base_shape)
+        self._faces = cone_faces(self.sides)
+        # rest joints of the held shape, so each batch needs only the kinematic chain
+        # (CylinderModel.segments_batch recomputes the whole rest mesh per call)
+        shape = self.base_shape[None]
+        self._rest_joints = np.einsum("jv,bvc->bjc", self.model.joint_regressor,
+                                      self.model.rest_vertices_batch(shape))[0]
+        pose0 = self.model.default_pose()[None]
+        self._root_offset = np.zeros(3)
+        self._root_offset = (self.model.joints_batch(shape, pose0) - self._posed_joints(pose0)[0])[0, 0]
+        self._local = self.cylinder.ends - self.cylinder.joints[:, None, :]  # (15, 2, 3)
+
+    def _posed_joints(self, poses: np.ndarray):
+        """Posed joints (B, 15, 3) and part rotations (B, 15, 3, 3) (the chain of
+        ``BodyModel.joints_batch`` with the rest joints precomputed)."""
+        from studio.body.skeleton import PART_PARENTS
+
+        G = self.model.part_rotations(poses)
+        J0 = self._rest_joints
+        J = np.empty((len(poses), len(J0), 3))
+        root = poses[:, :3] + self._root_offset
+        for k, parent in enumerate(PART_PARENTS):
+            if parent < 0:
+                J[:, k] = root + G[:, k] @ J0[k]
+            else:
+                J[:, k] = J[:, parent] + G[:, parent] @ (J0[k] - J0[parent])
+        return J, G
+
+    @property
+    def faces(self) -> np.ndarray:
+        return self._faces
+
+    def meshes(self, X: np.ndarray) -> np.ndarray:
+        from studio.fit.cones import cone_meshes
+
+        _, poses = self.split(X)
+        J, G = self._posed_joints(self.model.clip_pose(poses))
+        ends = J[:, :, None, :] + np.einsum("bpij,pkj->bpki", G, self._local)
+        return cone_meshes(ends, self.cylinder.radii, self.sides)

@@ -1,7 +1,11 @@
 """Fit speed on the simulated walk (anchors: cost ≤ 10 ms, one frame ≤ 60 s; thesis ~40 min Matlab).
 
 - one 4-view cost evaluation at full resolution (656×490): render the 4 silhouettes of a
-  fixed mesh + the silhouette cost (eq. 4.6), and the SCAPE mesh itself (batched);
+  fixed mesh with the fitter's renderer (``studio.render.spans.silhouettes_contour``; the
+  reference ``studio.render.silhouette`` is timed beside it, and the masks compared) + the
+  silhouette cost (eq. 4.6), and the SCAPE mesh itself (batched);
+- one objective evaluation (mesh + render + cost + priors) of the SCAPE and of the
+  cylinder model (§4.8.1) at the search level, in batches of 32;
 - the same at the pyramid levels the fitter searches with;
 - one single-frame fit from the silhouettes (particle filter → staged Nelder–Mead);
 - a sequence of N frames (default 20) fitted with 1 and with 2 worker processes.

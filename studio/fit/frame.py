@@ -7,6 +7,10 @@
    started from the initial heading hypotheses (or from the previous frame's pose with a
    smaller spread); then a partitioned pass (Deutscher's partitioned APF) re-searches
    root + spine + head, the arms and the legs in turn, the others held.
+   With ``FitOptions(search_model="cylinder")`` the first (global) pass scores the 15-cone
+   model of §4.8.1 instead (~3× faster per evaluation) and SCAPE takes over from the
+   partitioned passes on; measured on the walk sample it locks onto flipped leg
+   configurations (joint error ~200 mm), so the default stays ``"scape"``.
    Without a given shape, the shape starts from the stature read off the top of the visual
    hull (:func:`studio.fit.init.hull_height` → :func:`studio.body.shape_from_measurements`).
 4. Staged Nelder–Mead (§4.7.4, :func:`studio.optimize.thesis_stages`) refines root + shape,
@@ -40,6 +44,11 @@ log = logging.getLogger(__name__)
 class FitOptions:
     """Settings of a single-frame fit (defaults: the ≤ 60 s budget on one core).
 
+    Defaults measured on the walk sample (``benchmarks/fit_accuracy.py``): with the contour
+    renderer a level-1 evaluation costs about what a level-2 one did, and searching at level 1
+    (forearms ~6 px wide instead of ~3) with 240 + 450 Nelder–Mead evaluations took the
+    stature error from −17.7 to −5.9 mm and the surface distance from 16.4 to 9.8 mm.
+
     ``levels``: (search, refine, final) pyramid levels. ``n_shape_free``: shape
     coefficients optimised (by decreasing eigenvalue). ``fit_shape``: False holds the shape.
     ``search_model``: the body the initialisation and the particle filters score — ``"scape"``
@@ -47,15 +56,15 @@ class FitOptions:
     Nelder–Mead always refines the SCAPE model).
     """
 
-    levels: tuple[int, int, int] = (2, 1, 0)
+    levels: tuple[int, int, int] = (1, 1, 0)
     tau: float = 20.0
     xi: float = 1.0
     n_particles: int = 80
     n_layers: int = 8
     n_particles_tracking: int = 48
     n_layers_tracking: int = 5
-    nm_evaluations: int = 90
-    final_evaluations: int = 120
+    nm_evaluations: int = 240
+    final_evaluations: int = 450
     refine_particles: int = 0
     partition_particles: int = 40
     tracking_budget: float = 0.5
@@ -204,8 +213,11 @@ def fit_frame(
     targets = build_targets(masks, [c.name for c in cameras], options)
     n_free = options.n_shape_free if options.fit_shape else 0
     n_free = min(n_free, model.n_shape)
-    search_cls = CylinderObjective if options.search_model == "cylinder" else FrameObjective
-    pose_obj = search_cls(model, cameras, targets, base_shape, 0, options.prior_weight)
+    pose_obj = FrameObjective(model, cameras, targets, base_shape, 0, options.prior_weight)
+    # the global search may score the 15-cone model instead (§4.8.1); the initial headings and
+    # the partitioned passes stay on SCAPE (measured: cones alone can lock onto a flipped pose)
+    apf_obj = (CylinderObjective(model, cameras, targets, base_shape, 0, options.prior_weight)
+               if options.search_model == "cylinder" else pose_obj)
     timings["targets"] = time.perf_counter() - t_start
 
     # -- initialisation + particle filter on the pose (shape held)
@@ -227,10 +239,14 @@ def fit_frame(
     lo, hi = pose_bounds(model, starts[0, :2])
     starts = np.clip(starts, lo, hi)
     apf = annealed_particle_filter(
-        lambda X: pose_obj(X, search), starts, sigma, bounds=(lo, hi), n_particles=n_p, n_layers=n_l,
+        lambda X: apf_obj(X, search), starts, sigma, bounds=(lo, hi), n_particles=n_p, n_layers=n_l,
         vectorized=True, seed=rng,
     )
     x_pose = apf.x.copy()
+    if apf_obj is not pose_obj:  # keep the cone search's answer only if SCAPE agrees it is better
+        c_apf, c_start = pose_obj(np.stack([x_pose, starts[0]]), search)
+        if c_start < c_apf:
+            x_pose = starts[0].copy()
     # partitioned refinement (Deutscher's partitioned APF): torso+root, arms, legs in turn
     if options.partition_particles and options.partition_layers:
         scale = 0.5 if previous_pose is None else 0.3
@@ -291,7 +307,8 @@ def fit_frame(
     return FrameFit(
         frame=int(frame), gender=model.gender, shape=shape_out, pose=pose_out,
         joints=model.joints(shape_out, pose_out), costs=costs, timings={k: round(v, 4) for k, v in timings.items()},
-        n_evaluations=int(pose_obj.n_evaluations + obj.n_evaluations), settings=options.to_dict(),
+        n_evaluations=int(pose_obj.n_evaluations + obj.n_evaluations
+                          + (apf_obj.n_evaluations if apf_obj is not pose_obj else 0)), settings=options.to_dict(),
     )
 
 

@@ -1,7 +1,8 @@
 """Rendering: silhouettes, shadow meshes and synthetic colour frames of meshes in cameras.
 
-The silhouette path (:func:`silhouette`, :func:`shadow_mask`) is numpy-only and fast (the
-fitter calls it thousands of times); the colour path (:func:`rasterize` +
+The silhouette path (:func:`silhouette`, :func:`shadow_mask`) is numpy-only and exact;
+the fitter, which calls it thousands of times, uses :func:`silhouettes_contour` (fills the
+projected occluding contour row by row: same masks, ~1 ms per view); the colour path (:func:`rasterize` +
 :func:`shade_raster`) adds a z-buffer, barycentric interpolation and Lambertian shading.
 """
 
@@ -17,6 +18,7 @@ from studio.render.raster import (
 )
 from studio.render.shade import lambert, shade_raster, vertex_normals
 from studio.render.shadow import shadow_mask, shadow_vertices
+from studio.render.spans import silhouettes_contour, silhouettes_fast
 
 __all__ = [
     "DirectionalLight",
@@ -33,5 +35,7 @@ __all__ = [
     "shadow_vertices",
     "silhouette",
     "silhouettes",
+    "silhouettes_contour",
+    "silhouettes_fast",
     "vertex_normals",
 ]

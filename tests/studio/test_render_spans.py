@@ -1,0 +1,132 @@
+"""The fast silhouette paths (studio.render.spans) against the reference renderer and a brute force."""
+
+import numpy as np
+import pytest
+
+from calibration import Camera
+from studio.render import silhouette
+from studio.render.pyramid import level_camera
+from studio.render.spans import _topology, silhouettes_contour, silhouettes_fast
+
+
+def _camera(w=160, h=120, name="c", R=None, t=(0.0, 0.0, 3.0), dist=None, f=150.0):
+    K = np.array([[f, 0, (w - 1) / 2 + 0.3], [0, f, (h - 1) / 2 - 0.2], [0, 0, 1]])
+    return Camera(name=name, K=K, dist=np.zeros(5) if dist is None else np.asarray(dist, float),
+                  R=np.eye(3) if R is None else np.asarray(R, float), t=np.asarray(t, float), size=(w, h))
+
+
+def _rig():
+    """Four cameras around the origin looking at it (one with lens distortion)."""
+    cams = []
+    for k, ang in enumerate(np.radians([0.0, 80.0, 170.0, 260.0])):
+        c, s = np.cos(ang), np.sin(ang)
+        # camera looks along -radial direction, y down = -Z world
+        R = np.array([[-s, c, 0.0], [0.0, 0.0, -1.0], [-c, -s, 0.0]])
+        dist = [-0.12, 0.05, 0.001, -0.001, 0.0] if k == 2 else None
+        cams.append(_camera(name=f"cam{k}", R=R, t=(0.0, 0.0, 3.2), dist=dist, f=120.0 + 20 * k))
+    return cams
+
+
+def _brute(camera, V, F):
+    uv, _, _ = camera.project_points(V)
+    w, h = camera.size
+    ys, xs = np.mgrid[0:h, 0:w]
+    P = np.stack([xs.ravel(), ys.ravel()], axis=1).astype(float)
+    out = np.zeros(w * h, bool)
+    for a, b, c in F:
+        A, B, C = uv[a], uv[b], uv[c]
+        d = (B[0] - A[0]) * (C[1] - A[1]) - (B[1] - A[1]) * (C[0] - A[0])
+        if abs(d) < 1e-12:
+            continue
+        l1 = ((B[0] - P[:, 0]) * (C[1] - P[:, 1]) - (B[1] - P[:, 1]) * (C[0] - P[:, 0])) / d
+        l2 = ((C[0] - P[:, 0]) * (A[1] - P[:, 1]) - (C[1] - P[:, 1]) * (A[0] - P[:, 0])) / d
+        out |= (l1 >= 0) & (l2 >= 0) & (1 - l1 - l2 >= 0)
+    return out.reshape(h, w)
+
+
+def _box(lo, hi):
+    x0, y0, z0 = lo
+    x1, y1, z1 = hi
+    V = np.array([[x0, y0, z0], [x1, y0, z0], [x1, y1, z0], [x0, y1, z0],
+                  [x0, y0, z1], [x1, y0, z1], [x1, y1, z1], [x0, y1, z1]], float)
+    F = np.array([[0, 2, 1], [0, 3, 2], [4, 5, 6], [4, 6, 7], [0, 1, 5], [0, 5, 4],
+                  [1, 2, 6], [1, 6, 5], [2, 3, 7], [2, 7, 6], [3, 0, 4], [3, 4, 7]])
+    return V, F
+
+
+@pytest.fixture(scope="module")
+def body():
+    from studio.body import BodyModel
+
+    model = BodyModel.load("female")
+    rng = np.random.default_rng(4)
+    poses = []
+    for _ in range(2):
+        p = model.default_pose().astype(float)
+        p[6:] += rng.normal(0, 0.3, p[6:].shape)
+        poses.append(model.clip_pose(p))
+    meshes = [model.vertices(model.mean_shape(), p) - [0, 0, 0.85] for p in poses]
+    return model, meshes
+
+
+@pytest.mark.parametrize("level", [0, 1, 2])
+def test_contour_and_spans_equal_reference_on_body(body, level):
+    model, meshes = body
+    cams = [level_camera(c, level) for c in _rig()]
+    for V in meshes:
+        ref = [silhouette(c, V, model.faces) for c in cams]
+        fast = silhouettes_fast(cams, V, model.faces)
+        cont = silhouettes_contour(cams, V, model.faces)
+        for r, a, b in zip(ref, fast, cont, strict=True):
+            assert r.sum() > 400 >> (2 * level)
+            assert np.count_nonzero(r != a) == 0
+            # the winding fill differs only for pixel centres exactly on the contour
+            assert np.count_nonzero(r != b) <= 2
+
+
+def test_contour_matches_brute_force_on_body(body):
+    model, meshes = body
+    cam = _rig()[1].replace(size=(48, 64), K=np.array([[90.0, 0, 23.5], [0, 90.0, 31.5], [0, 0, 1]]))
+    ref = _brute(cam, meshes[0], model.faces)
+    ours = silhouettes_contour([cam], meshes[0], model.faces)[0]
+    assert ref.sum() > 100
+    assert np.count_nonzero(ours != ref) <= 2
+
+
+def test_large_triangles_box_and_clipping():
+    V, F = _box((-0.4, -0.3, -0.5), (0.5, 0.35, 0.6))
+    assert _topology(F, len(V)) is not None
+    cams = _rig() + [_camera(name="close", t=(0.0, 0.0, 0.9))]  # the box overflows this image
+    ref = [silhouette(c, V, F) for c in cams]
+    for r, a, b in zip(ref, silhouettes_fast(cams, V, F), silhouettes_contour(cams, V, F), strict=True):
+        assert r.sum() > 1000
+        assert np.count_nonzero(r != a) == 0
+        assert np.count_nonzero(r != b) <= 2
+    assert ref[-1].all()  # the close camera sees only the box
+
+
+def test_open_mesh_and_near_plane_fall_back():
+    rng = np.random.default_rng(3)
+    V = rng.uniform(-1.0, 1.0, (90, 3)) * [1.2, 0.9, 0.3]
+    F = rng.integers(0, len(V), (30, 3))
+    F = F[(F[:, 0] != F[:, 1]) & (F[:, 1] != F[:, 2]) & (F[:, 0] != F[:, 2])]
+    cam = _camera(64, 48, f=60.0)
+    assert _topology(F, len(V)) is None  # not closed: the contour path defers to the span path
+    ref = _brute(cam, V, F)
+    assert ref.sum() > 300
+    assert np.count_nonzero(silhouettes_fast([cam], V, F, closed=False)[0] != ref) == 0
+    # a closed box straddling the camera plane: faces behind `near` are skipped like the reference
+    Vb, Fb = _box((-0.5, -0.5, -3.5), (0.5, 0.5, 1.0))
+    r = silhouette(cam, Vb, Fb)
+    assert np.count_nonzero(silhouettes_contour([cam], Vb, Fb)[0] != r) == 0
+
+
+def test_empty_and_bad_inputs():
+    V, F = _box((-0.1, -0.1, 5.0), (0.1, 0.1, 5.2))
+    cam = _camera()
+    behind = silhouettes_contour([cam], V - [0, 0, 10.0], F)[0]
+    assert behind.shape == (120, 160) and not behind.any()
+    with pytest.raises(ValueError, match="vertices"):
+        silhouettes_contour([cam], V[:, :2], F)
+    with pytest.raises(ValueError, match="faces"):
+        silhouettes_fast([cam], V, F + 100)

@@ -3,6 +3,7 @@
 import numpy as np
 import pytest
 
+from meshkit import brute_force_silhouette
 from calibration import Camera
 from studio.render import silhouette
 from studio.render.pyramid import level_camera
@@ -14,25 +15,6 @@ def _camera(w=64, h=48, dist=None):
                   t=np.array([0.0, 0.0, 3.0]), size=(w, h))
 
 
-def _brute(camera, V, F):
-    """Pixel centres inside any projected triangle (same-sign barycentric test), pure loops."""
-    uv, _, _ = camera.project_points(V)
-    w, h = camera.size
-    ys, xs = np.mgrid[0:h, 0:w]
-    P = np.stack([xs.ravel(), ys.ravel()], axis=1).astype(float)
-    out = np.zeros(w * h, bool)
-    for a, b, c in F:
-        A, B, C = uv[a], uv[b], uv[c]
-        d = (B[0] - A[0]) * (C[1] - A[1]) - (B[1] - A[1]) * (C[0] - A[0])
-        if abs(d) < 1e-12:
-            continue
-        l1 = ((B[0] - P[:, 0]) * (C[1] - P[:, 1]) - (B[1] - P[:, 1]) * (C[0] - P[:, 0])) / d
-        l2 = ((C[0] - P[:, 0]) * (A[1] - P[:, 1]) - (C[1] - P[:, 1]) * (A[0] - P[:, 0])) / d
-        l3 = 1 - l1 - l2
-        out |= (l1 >= 0) & (l2 >= 0) & (l3 >= 0)
-    return out.reshape(h, w)
-
-
 def test_random_triangles_match_brute_force():
     rng = np.random.default_rng(3)
     V = rng.uniform(-1.0, 1.0, (90, 3)) * [1.2, 0.9, 0.3]
@@ -40,7 +22,7 @@ def test_random_triangles_match_brute_force():
     F = F[(F[:, 0] != F[:, 1]) & (F[:, 1] != F[:, 2]) & (F[:, 0] != F[:, 2])]
     cam = _camera()
     ours = silhouette(cam, V, F, closed=False)
-    ref = _brute(cam, V, F)
+    ref = brute_force_silhouette(cam, V, F)
     assert ref.sum() > 300  # the test image is not trivially empty
     assert np.count_nonzero(ours != ref) == 0
 
@@ -54,7 +36,7 @@ def test_closed_body_mesh_matches_brute_force():
     cam = cam.replace(K=np.array([[90.0, 0, 23.5], [0, 90.0, 31.5], [0, 0, 1]]),
                       R=np.array([[1.0, 0, 0], [0, 0, -1], [0, 1, 0]]), t=np.array([0.0, 0.0, 3.0]))
     ours = silhouette(cam, V, model.faces)  # front faces only
-    ref = _brute(cam, V, model.faces)  # every face
+    ref = brute_force_silhouette(cam, V, model.faces)  # every face
     assert ref.sum() > 200
     # front-face culling of a closed mesh must not change the mask (allow ties on shared edges)
     assert np.count_nonzero(ours != ref) <= 2

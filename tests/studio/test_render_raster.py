@@ -1,12 +1,16 @@
 """Rasteriser geometry: pixels agree with ``Camera.project``, z-buffer, silhouette paths."""
 
+from functools import partial
+
 import numpy as np
 import pytest
 
 from calibration import Camera
+from meshkit import uv_sphere
 from studio.render import front_facing, rasterize, silhouette
 
 SIZE = (160, 120)
+sphere = partial(uv_sphere, n=24)  # small triangles: the vectorised path
 
 
 def camera(dist=(-0.05, 0.01, 0.0, 0.0, 0.0), name="c"):
@@ -22,26 +26,6 @@ def box(center, half):
     F = np.array([[0, 1, 3], [0, 3, 2], [4, 6, 7], [4, 7, 5], [0, 4, 5], [0, 5, 1],
                   [2, 3, 7], [2, 7, 6], [0, 2, 6], [0, 6, 4], [1, 5, 7], [1, 7, 3]])
     return V, F
-
-
-def sphere(center, radius, n=24):
-    """UV sphere with small triangles (the vectorised path)."""
-    th = np.linspace(0, np.pi, n + 1)[1:-1]
-    ph = np.linspace(0, 2 * np.pi, 2 * n, endpoint=False)
-    T, P = np.meshgrid(th, ph, indexing="ij")
-    pts = np.stack([np.sin(T) * np.cos(P), np.sin(T) * np.sin(P), np.cos(T)], -1).reshape(-1, 3)
-    V = np.vstack([pts, [[0, 0, 1]], [[0, 0, -1]]]) * radius + center
-    m = 2 * n
-    F = []
-    for i in range(n - 2):
-        for j in range(m):
-            a, b = i * m + j, i * m + (j + 1) % m
-            F += [[a, a + m, b], [b, a + m, b + m]]
-    top, bot = len(V) - 2, len(V) - 1
-    for j in range(m):
-        F.append([top, j, (j + 1) % m])
-        F.append([bot, (n - 2) * m + (j + 1) % m, (n - 2) * m + j])
-    return V, np.array(F)
 
 
 def test_tiny_mesh_lands_on_projected_pixel():

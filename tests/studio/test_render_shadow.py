@@ -4,6 +4,7 @@ import numpy as np
 import pytest
 
 from calibration import Camera, GroundPlane
+from meshkit import uv_sphere as sphere
 from studio.render import (
     DirectionalLight,
     PointLight,
@@ -13,24 +14,6 @@ from studio.render import (
     shadow_vertices,
     vertex_normals,
 )
-
-
-def sphere(center, radius, n=16):
-    th = np.linspace(0, np.pi, n + 1)[1:-1]
-    ph = np.linspace(0, 2 * np.pi, 2 * n, endpoint=False)
-    T, P = np.meshgrid(th, ph, indexing="ij")
-    pts = np.stack([np.sin(T) * np.cos(P), np.sin(T) * np.sin(P), np.cos(T)], -1).reshape(-1, 3)
-    V = np.vstack([pts, [[0, 0, 1]], [[0, 0, -1]]]) * radius + center
-    m = 2 * n
-    F = []
-    for i in range(n - 2):
-        for j in range(m):
-            a, b = i * m + j, i * m + (j + 1) % m
-            F += [[a, a + m, b], [b, a + m, b + m]]
-    top, bot = len(V) - 2, len(V) - 1
-    for j in range(m):
-        F += [[top, j, (j + 1) % m], [bot, (n - 2) * m + (j + 1) % m, (n - 2) * m + j]]
-    return V, np.array(F)
 
 
 def test_point_light_projection_eq_5_2():

@@ -3,6 +3,7 @@
 import numpy as np
 import pytest
 
+from meshkit import brute_force_silhouette
 from calibration import Camera
 from studio.render import silhouette
 from studio.render.pyramid import level_camera
@@ -25,23 +26,6 @@ def _rig():
         dist = [-0.12, 0.05, 0.001, -0.001, 0.0] if k == 2 else None
         cams.append(_camera(name=f"cam{k}", R=R, t=(0.0, 0.0, 3.2), dist=dist, f=120.0 + 20 * k))
     return cams
-
-
-def _brute(camera, V, F):
-    uv, _, _ = camera.project_points(V)
-    w, h = camera.size
-    ys, xs = np.mgrid[0:h, 0:w]
-    P = np.stack([xs.ravel(), ys.ravel()], axis=1).astype(float)
-    out = np.zeros(w * h, bool)
-    for a, b, c in F:
-        A, B, C = uv[a], uv[b], uv[c]
-        d = (B[0] - A[0]) * (C[1] - A[1]) - (B[1] - A[1]) * (C[0] - A[0])
-        if abs(d) < 1e-12:
-            continue
-        l1 = ((B[0] - P[:, 0]) * (C[1] - P[:, 1]) - (B[1] - P[:, 1]) * (C[0] - P[:, 0])) / d
-        l2 = ((C[0] - P[:, 0]) * (A[1] - P[:, 1]) - (C[1] - P[:, 1]) * (A[0] - P[:, 0])) / d
-        out |= (l1 >= 0) & (l2 >= 0) & (1 - l1 - l2 >= 0)
-    return out.reshape(h, w)
 
 
 def _box(lo, hi):
@@ -87,7 +71,7 @@ def test_contour_and_spans_equal_reference_on_body(body, level):
 def test_contour_matches_brute_force_on_body(body):
     model, meshes = body
     cam = _rig()[1].replace(size=(48, 64), K=np.array([[90.0, 0, 23.5], [0, 90.0, 31.5], [0, 0, 1]]))
-    ref = _brute(cam, meshes[0], model.faces)
+    ref = brute_force_silhouette(cam, meshes[0], model.faces)
     ours = silhouettes_contour([cam], meshes[0], model.faces)[0]
     assert ref.sum() > 100
     assert np.count_nonzero(ours != ref) <= 2
@@ -112,7 +96,7 @@ def test_open_mesh_and_near_plane_fall_back():
     F = F[(F[:, 0] != F[:, 1]) & (F[:, 1] != F[:, 2]) & (F[:, 0] != F[:, 2])]
     cam = _camera(64, 48, f=60.0)
     assert _topology(F, len(V)) is None  # not closed: the contour path defers to the span path
-    ref = _brute(cam, V, F)
+    ref = brute_force_silhouette(cam, V, F)
     assert ref.sum() > 300
     assert np.count_nonzero(silhouettes_fast([cam], V, F, closed=False)[0] != ref) == 0
     # a closed box straddling the camera plane: faces behind `near` are skipped like the reference

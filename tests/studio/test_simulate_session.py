@@ -8,30 +8,13 @@ import pytest
 import yaml
 
 from calibration import RigCalibration
+from meshkit import uv_sphere
 from rigs.imageio import read_image
 from rigs.session import Session
 from studio.render import shadow_mask, silhouette
 from studio.simulate import SpecError, apply_sensor, ensure_rendered, load_spec, simulate
 from studio.simulate.scene import Scene
 from studio.simulate.truth_build import PART_NAMES, QUANT_SCALE
-
-
-def _sphere(center, radius, n=10):
-    th = np.linspace(0, np.pi, n + 1)[1:-1]
-    ph = np.linspace(0, 2 * np.pi, 2 * n, endpoint=False)
-    T, P = np.meshgrid(th, ph, indexing="ij")
-    pts = np.stack([np.sin(T) * np.cos(P), np.sin(T) * np.sin(P), np.cos(T)], -1).reshape(-1, 3)
-    V = np.vstack([pts, [[0, 0, 1]], [[0, 0, -1]]]) * radius + center
-    m = 2 * n
-    F = []
-    for i in range(n - 2):
-        for j in range(m):
-            a, b = i * m + j, i * m + (j + 1) % m
-            F += [[a, a + m, b], [b, a + m, b + m]]
-    top, bot = len(V) - 2, len(V) - 1
-    for j in range(m):
-        F += [[top, j, (j + 1) % m], [bot, (n - 2) * m + (j + 1) % m, (n - 2) * m + j]]
-    return V, np.array(F)
 
 
 def make_body(path: Path, frames: int = 3) -> np.ndarray:
@@ -42,7 +25,7 @@ def make_body(path: Path, frames: int = 3) -> np.ndarray:
              ("foot_r", [0.05, -0.1, 0.05], [0.1, 0.05, 0.05])]
     Vs, Fs, parts = [], [], []
     for name, c, r in blobs:
-        V, F = _sphere(np.zeros(3), 1.0)
+        V, F = uv_sphere(np.zeros(3), 1.0, n=10)
         Fs.append(F + sum(len(v) for v in Vs))
         Vs.append(V * r + c)
         parts.append(np.full(len(V), PART_NAMES.index(name), np.uint8))

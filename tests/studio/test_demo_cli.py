@@ -18,13 +18,7 @@ def _tiny_session(path):
     for k in range(3):
         a = np.pi / 4 + 2 * np.pi * k / 3
         eye = np.array([3.6 * np.cos(a), 3.6 * np.sin(a), 2.3])
-        z = np.array([0, 0, 0.9]) - eye
-        z /= np.linalg.norm(z)
-        x = np.cross(z, [0, 0, 1.0])
-        x /= np.linalg.norm(x)
-        R = np.stack([x, np.cross(z, x), z])
-        K = np.array([[f, 0, (w - 1) / 2], [0, f, (h - 1) / 2], [0, 0, 1]])
-        cams.append(Camera(name=f"cam{k}", K=K, dist=np.zeros(5), R=R, t=-R @ eye, size=(w, h)))
+        cams.append(Camera.look_at(f"cam{k}", eye, [0, 0, 0.9], f, (w, h), np.zeros(5)))
     calib = path.parent / "calib.json"
     RigCalibration(cameras={c.name: c for c in cams}).save(calib)
     writer = SessionWriter.create(path, [c.name for c in cams], rig="test", calibration=calib)

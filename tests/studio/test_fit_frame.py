@@ -21,13 +21,7 @@ def ring_cameras(n=4, size=(328, 246), radius=3.6, height=2.3, focal=280.0):
     for k in range(n):
         a = np.pi / 4 + 2 * np.pi * k / n
         eye = np.array([radius * np.cos(a), radius * np.sin(a), height])
-        z = np.array([0, 0, 0.9]) - eye
-        z /= np.linalg.norm(z)
-        x = np.cross(z, [0, 0, 1.0])
-        x /= np.linalg.norm(x)
-        R = np.stack([x, np.cross(z, x), z])
-        K = np.array([[focal, 0, (w - 1) / 2], [0, focal, (h - 1) / 2], [0, 0, 1]])
-        cams.append(Camera(name=f"cam{k}", K=K, dist=np.zeros(5), R=R, t=-R @ eye, size=size))
+        cams.append(Camera.look_at(f"cam{k}", eye, [0, 0, 0.9], focal, (w, h), np.zeros(5)))
     return cams
 
 

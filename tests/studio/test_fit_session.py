@@ -20,13 +20,7 @@ def _cameras(size=(164, 124), focal=140.0):
     for k in range(3):
         a = np.pi / 4 + 2 * np.pi * k / 3
         eye = np.array([3.6 * np.cos(a), 3.6 * np.sin(a), 2.3])
-        z = np.array([0, 0, 0.9]) - eye
-        z /= np.linalg.norm(z)
-        x = np.cross(z, [0, 0, 1.0])
-        x /= np.linalg.norm(x)
-        R = np.stack([x, np.cross(z, x), z])
-        K = np.array([[focal, 0, (w - 1) / 2], [0, focal, (h - 1) / 2], [0, 0, 1]])
-        cams.append(Camera(name=f"cam{k}", K=K, dist=np.zeros(5), R=R, t=-R @ eye, size=size))
+        cams.append(Camera.look_at(f"cam{k}", eye, [0, 0, 0.9], focal, (w, h), np.zeros(5)))
     return cams
 
 

@@ -140,7 +140,7 @@ class CylinderObjective(FrameObjective):
 
     def __post_init__(self):
         from studio.body import CylinderModel
-        from studio.fit.cones import cone_faces
+        from studio.body.cylinder import cone_faces
 
         super().__post_init__()
         if self.n_shape_free:
@@ -178,7 +178,7 @@ class CylinderObjective(FrameObjective):
         return self._faces
 
     def meshes(self, X: np.ndarray) -> np.ndarray:
-        from studio.fit.cones import cone_meshes
+        from studio.body.cylinder import cone_meshes
 
         _, poses = self.split(X)
         J, G = self._posed_joints(self.model.clip_pose(poses))

@@ -44,5 +44,17 @@ def test_cones_follow_the_pose(cyl):
     assert ends[P["lowerleg_l"], 1, 1] < cyl.ends[P["lowerleg_l"], 1, 1] - 0.2  # foot moved forward (-y)
     v, f = cyl.mesh(pose)
     assert f.max() == len(v) - 1
+    # geometry: each cone's rings lie on circles of its radii around its axis, caps on the ends
+    sides = 12
+    radii = cyl.radii
+    for p in range(15):
+        a, b = ends[p]
+        u = (b - a) / np.linalg.norm(b - a)
+        block = v[p * (2 * sides + 2):(p + 1) * (2 * sides + 2)]
+        for ring, centre, r in ((block[:sides], a, radii[p, 0]), (block[sides:2 * sides], b, radii[p, 1])):
+            d = ring - centre
+            np.testing.assert_allclose(d @ u, 0.0, atol=1e-12)
+            np.testing.assert_allclose(np.linalg.norm(d, axis=1), r, rtol=1e-12)
+        np.testing.assert_allclose(block[-2:], [a, b], atol=1e-12)
     with pytest.raises(BodyModelError, match="pose must have shape"):
         cyl.segments(np.zeros(4))

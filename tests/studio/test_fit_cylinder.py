@@ -7,7 +7,7 @@ from calibration import Camera
 from studio.body import BodyModel
 from studio.cost import SilhouetteTarget
 from studio.fit import FitError, FitOptions
-from studio.fit.cones import cone_faces, cone_meshes
+from studio.body.cylinder import cone_faces, cone_meshes
 from studio.fit.objective import CylinderObjective, FrameObjective
 from studio.render import silhouette
 

@@ -3,8 +3,12 @@
 Renders (once) the walk sample, segments the frames, fits them with ``studio.fit.fit_session``
 (given gender, 2 workers), then compares with the truth:
 
-- measurements (stature, chest/waist/hip circumference; arm span has no truth in the sample)
-  as mean ± spread over frames, error = mean − truth;
+- measurements (every reported one: stature, arm span, shoulder breadth, chest/waist/hip
+  circumference, inseam, arm length, mass) as mean ± spread over frames, error = mean − truth,
+  where the truth is the true body measured by the SAME definitions as the fit
+  (``truth/measurements.json`` "studio" entry, see ``studio.simulate.session.studio_truth``);
+  the simulator's Anny-definition values (waist from Anny's anthropometry, chest/hips from
+  slices of Anny's T-pose, T-pose stature) are shown beside them as ``truth_anny``;
 - mean surface distance fitted ↔ true mesh (symmetric, point-to-surface via dense samples);
 - mean joint position error (eq. 4.17): our joint regressor applied to the fitted mesh and to
   the true Anny mesh mapped into our topology (``anny_correspondence``);
@@ -34,6 +38,22 @@ ANCHORS = {
     "silhouette_precision": ("≥ 0.95 (thesis 0.88)", 0.95),
     "silhouette_recall": ("≥ 0.95 (thesis 0.85)", 0.95),
 }
+
+
+MEASUREMENT_KEYS = ("mean", "std", "unit", "truth", "error", "truth_source", "truth_anny", "error_anny")
+
+
+def measurement_lines(table: dict) -> list[str]:
+    """Rows of the measurement block: mean ± std, same-definition truth and error, Anny truth and error."""
+    fmt = (lambda v, sign="": "n/a" if v is None else f"{v:{sign}.1f}")  # noqa: E731
+    lines = [f"{'measurement':22s} {'unit':>4s} {'mean':>8s} {'std':>6s} {'truth':>8s} {'error':>7s}"
+             f"   {'truth_anny':>10s} {'err_anny':>8s}"]
+    for name, r in table.items():
+        src = "" if r.get("truth_source") in (None, "studio") else f" ({r['truth_source']} def.)"
+        lines.append(f"{name:22s} {r['unit']:>4s} {r['mean']:8.1f} {r['std']:6.1f} {fmt(r['truth']):>8s} "
+                     f"{fmt(r['error'], '+'):>7s}   {fmt(r.get('truth_anny')):>10s} "
+                     f"{fmt(r.get('error_anny'), '+'):>8s}{src}")
+    return lines
 
 
 def main(argv=None) -> int:
@@ -118,8 +138,9 @@ def main(argv=None) -> int:
         "workers": args.workers,
         "per_frame": rows,
         "mean": agg,
-        "measurements": {k: {kk: v[kk] for kk in ("mean", "std", "truth", "error", "unit")} for k, v in table.items()},
+        "measurements": {k: {kk: v.get(kk) for kk in MEASUREMENT_KEYS} for k, v in table.items()},
         "stature_error_mm": st["error"],
+        "arm_span_error_mm": table["arm_span"]["error"],
         "stature_spread_mm": st["std"],
         "robustness": robustness,
         "anchors": {k: v[0] for k, v in ANCHORS.items()},
@@ -141,10 +162,8 @@ def main(argv=None) -> int:
         print(f"{k:34s} {v:14.3f}   {ANCHORS[k][0]}  {'OK' if ok(v) else 'MISSED'}")
     print(f"{'stature spread (std) mm':34s} {st['std']:14.1f}   thesis ±15")
     print(f"{'joint error (eq. 4.17) mm':34s} {agg['joint_error_mm']:14.1f}")
-    for name in ("chest_circumference", "waist_circumference", "hip_circumference", "arm_span"):
-        r = table[name]
-        err = "n/a" if r["error"] is None else f"{r['error']:+.1f}"
-        print(f"{name + ' mm (mean±std, err)':34s} {r['mean']:8.1f}±{r['std']:<5.1f} err {err}")
+    for line in measurement_lines(table):
+        print(line)
     for r in robustness:
         print(f"robustness σ={r['sigma_rad']:.2f} rad: joint error {r['joint_error_before_mm']:.0f} → "
               f"{r['joint_error_after_mm']:.0f} mm")

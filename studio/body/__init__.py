@@ -12,7 +12,14 @@ The model files are built by ``studio model build`` (needs the ``model-build`` e
 
 from studio.body.cylinder import CylinderModel
 from studio.body.inverse import shape_from_measurements
-from studio.body.measure import MEASUREMENT_NAMES, measure, mesh_volume, slice_circumference
+from studio.body.measure import (
+    MEASUREMENT_NAMES,
+    measure,
+    measure_anny_body,
+    measure_mesh,
+    mesh_volume,
+    slice_circumference,
+)
 from studio.body.meshio import read_ply, write_mesh
 from studio.body.model import GENDERS, BodyModel, BodyModelError, anny_correspondence
 from studio.body.skeleton import PART_NAMES, PART_PARENTS, POSE_SIZE
@@ -28,6 +35,8 @@ __all__ = [
     "PART_PARENTS",
     "POSE_SIZE",
     "measure",
+    "measure_anny_body",
+    "measure_mesh",
     "mesh_volume",
     "read_ply",
     "shape_from_measurements",

@@ -15,6 +15,10 @@ the slice's convex hull (a tape measure bridges concavities, thesis §6.4.4):
 - ``arm_length``: shoulder joint → elbow → wrist joint (mean of both arms);
 - ``volume`` (closed mesh, divergence theorem) and ``mass`` = volume × density
   (980 kg/m³ by default, the value Anny's anthropometry uses).
+
+:func:`measure_mesh` holds the definitions (on given meshes and joints); :func:`measure`
+applies them to a body of the model, :func:`measure_anny_body` to a true (simulated) Anny
+body mapped into the model's topology, so that fit and truth share every definition.
 """
 
 from __future__ import annotations
@@ -26,6 +30,9 @@ from studio.body.skeleton import PART_NAMES
 
 __all__ = [
     "measure",
+    "measure_mesh",
+    "measure_anny_body",
+    "place_canonical",
     "mesh_volume",
     "slice_points",
     "convex_perimeter",
@@ -123,23 +130,53 @@ def t_pose(model, shape) -> np.ndarray:
     return model.clip_pose(pose)
 
 
-def measure(model, shape, density: float = 980.0) -> dict[str, float]:
-    """Measurements of the body ``shape`` of ``model`` (metres, kilograms); see module doc."""
-    shape = model.check_shape(shape)
+def _check_mesh(name: str, array, shape: tuple, dtype=np.float64) -> np.ndarray:
+    """``array`` as ``dtype`` with ``shape`` (None = any length), or a ValueError naming it."""
+    a = np.asarray(array, dtype=dtype)
+    if a.ndim != len(shape) or any(w is not None and w != n for w, n in zip(shape, a.shape)):
+        want = "(" + ", ".join("N" if w is None else str(w) for w in shape) + ")"
+        raise ValueError(f"{name} must have shape {want}, got {a.shape}")
+    if a.dtype.kind == "f" and not np.all(np.isfinite(a)):
+        raise ValueError(f"{name} contains NaN or infinite values")
+    return a
+
+
+def measure_mesh(
+    vertices: np.ndarray,
+    tpose_vertices: np.ndarray,
+    joints: np.ndarray,
+    faces: np.ndarray,
+    parts: np.ndarray,
+    face_parts: np.ndarray,
+    density: float = 980.0,
+) -> dict[str, float]:
+    """Measurements (metres, kilograms; see module doc) of one body given as meshes.
+
+    ``vertices`` (V, 3) float64: the body in its canonical standing pose (the model's
+    default pose), Z up, facing -y, its sagittal plane at x = 0 (``inseam`` looks for the
+    crotch within 15 mm of it); ``tpose_vertices`` (V, 3): the same body in the T-pose of
+    :func:`t_pose` (only its x-extent is used: ``arm_span``); ``joints`` (15, 3): joint
+    centres of the canonical pose in :data:`~studio.body.skeleton.PART_NAMES` order;
+    ``faces`` (F, 3) int; ``parts`` (V,) and ``face_parts`` (F,): part index per vertex /
+    triangle (the model's topology: ``model.faces``, ``model.parts``, ``model.face_parts``).
+    """
+    v = _check_mesh("vertices", vertices, (None, 3))
+    vt = _check_mesh("tpose_vertices", tpose_vertices, (len(v), 3))
+    J = _check_mesh("joints", joints, (len(PART_NAMES), 3))
+    f = _check_mesh("faces", faces, (None, 3), np.int64)
+    parts = _check_mesh("parts", parts, (len(v),), np.int64)
+    fp = _check_mesh("face_parts", face_parts, (len(f),), np.int64)
+    if len(f) and (f.min() < 0 or f.max() >= len(v)):
+        raise ValueError(f"faces index vertices {f.min()}..{f.max()}, the mesh has {len(v)}")
     if not np.isfinite(density) or density <= 0:
         raise ValueError(f"density must be a positive number of kg/m³, got {density}")
-    v = model.vertices(shape)
-    J = model.joints(shape)
-    f = model.faces
-    fp = model.face_parts
     out: dict[str, float] = {}
     out["stature"] = float(v[:, 2].max() - v[:, 2].min())
-    vt = model.vertices(shape, t_pose(model, shape))
     out["arm_span"] = float(vt[:, 0].max() - vt[:, 0].min())
 
     sh_z = 0.5 * (J[_P["upperarm_l"], 2] + J[_P["upperarm_r"], 2])
     hip_z = 0.5 * (J[_P["upperleg_l"], 2] + J[_P["upperleg_r"], 2])
-    sel = np.isin(model.parts, [_P["torso"], _P["upperarm_l"], _P["upperarm_r"]]) & (v[:, 2] > sh_z - 0.03)
+    sel = np.isin(parts, [_P["torso"], _P["upperarm_l"], _P["upperarm_r"]]) & (v[:, 2] > sh_z - 0.03)
     out["shoulder_breadth"] = float(v[sel, 0].max() - v[sel, 0].min()) if np.any(sel) else 0.0
 
     torso_f = f[fp == _P["torso"]]
@@ -156,7 +193,7 @@ def measure(model, shape, density: float = 980.0) -> dict[str, float]:
 
     knee_z = 0.5 * (J[_P["lowerleg_l"], 2] + J[_P["lowerleg_r"], 2])
     mid = (np.abs(v[:, 0]) < 0.015) & (v[:, 2] > knee_z) & (v[:, 2] < sh_z)
-    mid &= np.isin(model.parts, [_P["pelvis"], _P["upperleg_l"], _P["upperleg_r"]])
+    mid &= np.isin(parts, [_P["pelvis"], _P["upperleg_l"], _P["upperleg_r"]])
     out["inseam"] = float(v[mid, 2].min() - v[:, 2].min()) if np.any(mid) else float("nan")
 
     lengths = []
@@ -167,3 +204,55 @@ def measure(model, shape, density: float = 980.0) -> dict[str, float]:
     out["volume"] = float(mesh_volume(v, f))
     out["mass"] = out["volume"] * density
     return out
+
+
+def measure(model, shape, density: float = 980.0) -> dict[str, float]:
+    """Measurements of the body ``shape`` of ``model`` (metres, kilograms); see module doc.
+
+    The default-pose mesh, its T-pose (:func:`t_pose`) and joints, measured by
+    :func:`measure_mesh`.
+    """
+    shape = model.check_shape(shape)
+    if not np.isfinite(density) or density <= 0:
+        raise ValueError(f"density must be a positive number of kg/m³, got {density}")
+    v = model.vertices(shape)
+    vt = model.vertices(shape, t_pose(model, shape))
+    return measure_mesh(v, vt, model.joints(shape), model.faces, model.parts, model.face_parts, density)
+
+
+def place_canonical(vertices: np.ndarray, parts: np.ndarray) -> np.ndarray:
+    """Shift (V, 3) like the model's default pose: pelvis centroid over the origin, floor z = 0.
+
+    ``parts`` (V,) gives the pelvis vertices (part index of ``"pelvis"``).
+    """
+    v = np.asarray(vertices, dtype=np.float64)
+    c = v[np.asarray(parts) == _P["pelvis"]].mean(axis=0)
+    return v - [c[0], c[1], v[:, 2].min()]
+
+
+def measure_anny_body(model, rest_vertices, tpose_vertices, density: float = 980.0) -> dict[str, float]:
+    """Measurements by this module's definitions of a body given as Anny meshes.
+
+    ``rest_vertices`` and ``tpose_vertices`` (13348, 3): an Anny body (topology
+    ``anny-noeyes-notongue``, Anny's frame: Z up, facing -y, left +x) in Anny's rest pose —
+    the posture the model's template and default pose were built from — and in the T-pose of
+    :func:`t_pose` (upper arms horizontal, elbows straight), e.g. ``rest_q`` / ``tpose_q`` of
+    a simulation ``body.npz``. Both are mapped into the model's topology with
+    :func:`~studio.body.model.anny_correspondence` (the map the model was learned with),
+    placed like the default pose (:func:`place_canonical`), and measured with
+    :func:`measure_mesh`; the joints are the model's ``joint_regressor`` applied to the
+    mapped rest mesh. The truth of a simulated person by the same definitions as a fit.
+    """
+    from studio.body.model import anny_correspondence
+
+    A = anny_correspondence()
+    n = A.shape[1]
+    rest = _check_mesh("rest_vertices", rest_vertices, (n, 3))
+    tpose = _check_mesh("tpose_vertices", tpose_vertices, (n, 3))
+    if A.shape[0] != model.n_vertices:
+        raise ValueError(f"the Anny correspondence maps to {A.shape[0]} vertices, the "
+                         f"{model.gender} model has {model.n_vertices}")
+    v = place_canonical(A @ rest, model.parts)
+    vt = place_canonical(A @ tpose, model.parts)
+    J = np.asarray(model.joint_regressor, dtype=np.float64) @ v
+    return measure_mesh(v, vt, J, model.faces, model.parts, model.face_parts, density)

@@ -14,7 +14,7 @@ import numpy as np
 
 from studio.fit.errors import FitError
 
-__all__ = ["hull_centroid", "hull_height", "initial_poses", "standing_pose"]
+__all__ = ["hull_centroid", "hull_height", "initial_poses", "standing_pose", "stride_poses"]
 
 
 def _in_mask(cam, mask: np.ndarray, pts: np.ndarray) -> np.ndarray:
@@ -69,18 +69,48 @@ def standing_pose(model) -> np.ndarray:
     return model.clip_pose(pose)
 
 
-def initial_poses(objective, cameras, masks, level: int, *, n_headings: int = 12, keep: int = 4,
+def stride_poses(model) -> np.ndarray:
+    """Starting postures (3, POSE_SIZE): standing (:func:`standing_pose`) and a walking stride
+    with either leg forward (hips ∓0.35 rad, the back knee bent 0.3 rad)."""
+    from studio.body.skeleton import PART_NAMES, pose_slices
+
+    sl = pose_slices()
+    idx = {n: sl[i] for i, n in enumerate(PART_NAMES)}
+    base = standing_pose(model)
+    out = [base]
+    for front, back in (("l", "r"), ("r", "l")):
+        p = base.copy()
+        p[idx[f"upperleg_{front}"].start] = -0.35  # flexion (forward) is negative about x
+        p[idx[f"upperleg_{back}"].start] = 0.3
+        p[idx[f"lowerleg_{back}"]] = 0.3
+        out.append(model.clip_pose(p))
+    return np.stack(out)
+
+
+def initial_poses(objective, cameras, masks, level: int, *, n_headings: int = 12, keep: int | None = 4,
                   shape=None) -> tuple[np.ndarray, np.ndarray]:
-    """Starts (keep, D) for the particle filter and their costs (keep,), best first."""
+    """Starts (keep, D) for the particle filter and their costs (keep,), best first.
+
+    Every heading of ``n_headings`` is scored in each posture of :func:`stride_poses` (a
+    person in mid-stride seen in the standing posture looks best side-on, so the standing
+    posture alone picks the wrong heading); the best posture per heading is kept and the
+    ``keep`` best headings are returned (``None``: every heading).
+    """
     xy = hull_centroid(cameras, masks)
-    base = standing_pose(objective.model)
-    base[:2] = xy
+    postures = stride_poses(objective.model)
+    postures[:, :2] = xy
     yaws = np.linspace(-np.pi, np.pi, n_headings, endpoint=False)
-    X = np.repeat(objective.pack(objective.base_shape if shape is None else shape, base)[None], n_headings, axis=0)
-    X[:, 5] = yaws
-    costs = objective(X, level)
-    order = np.argsort(costs)[:keep]
-    return X[order], costs[order]
+    base = objective.base_shape if shape is None else shape
+    X = np.stack([objective.pack(base, p) for p in postures])  # (P, D)
+    X = np.repeat(X[None], n_headings, axis=0)  # (H, P, D)
+    X[:, :, 5] = yaws[:, None]
+    X = X.reshape(-1, X.shape[-1])
+    costs = objective(X, level).reshape(n_headings, len(postures))
+    best = np.argmin(costs, axis=1)
+    Xh = X.reshape(n_headings, len(postures), -1)[np.arange(n_headings), best]
+    ch = costs[np.arange(n_headings), best]
+    order = np.argsort(ch)[:keep]
+    return Xh[order], ch[order]
 
 
 def hull_height(cameras, masks, xy, *, radius: float = 0.35, step: float = 0.02, dz: float = 0.01) -> float:
@@ -99,3 +129,4 @@ def hull_height(cameras, masks, xy, *, radius: float = 0.35, step: float = 0.02,
     if not inside.any():
         raise FitError("the visual hull above the body's floor position is empty: cannot estimate the height")
     return float(pts[inside, 2].max())
+

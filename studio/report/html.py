@@ -65,15 +65,22 @@ def _measurement_figure(table: dict) -> str:
 
 def _table_html(table: dict) -> str:
     has_truth = any(r["truth"] is not None for r in table.values())
+    has_anny = any(r.get("truth_anny") is not None and r.get("truth_source") == "studio" for r in table.values())
     head = "<tr><th>measurement</th><th>mean ± std over frames</th>"
     head += "<th>truth</th><th>error</th>" if has_truth else ""
+    head += "<th>truth (Anny's definition)</th><th>error</th>" if has_anny else ""
     rows = [head + "</tr>"]
+
+    def pair(value, error, u):
+        return "<td>–</td><td>–</td>" if value is None else f"<td>{value:.1f} {u}</td><td>{error:+.1f} {u}</td>"
+
     for name, r in table.items():
         u = r["unit"]
         row = f"<tr><td>{html.escape(name.replace('_', ' '))}</td><td>{r['mean']:.1f} ± {r['std']:.1f} {u}</td>"
         if has_truth:
-            row += ("<td>–</td><td>–</td>" if r["truth"] is None
-                    else f"<td>{r['truth']:.1f} {u}</td><td>{r['error']:+.1f} {u}</td>")
+            row += pair(r["truth"], r["error"], u)
+        if has_anny:
+            row += pair(r.get("truth_anny"), r.get("error_anny"), u)
         rows.append(row + "</tr>")
     return "<table>" + "".join(rows) + "</table>"
 
@@ -141,7 +148,7 @@ mean fit time {timing:.1f} s per frame. Thesis ch. 4: annealed particle filter o
 silhouette cost eq. 4.6 with coarse-to-fine pyramid levels.</p>
 <h2>Measurements</h2>
 <p>From the fitted shape of every frame (lengths in mm, rest pose; arm span in a T-pose).
-Spread = standard deviation over frames (thesis §4.8.6).{' Truth: the simulated person (Anny anthropometry).' if truth else ''}</p>
+Spread = standard deviation over frames (thesis §4.8.6).{' Truth: the simulated person measured with the same definitions as the fit (and, where it differs, with the simulator’s Anny anthropometry).' if truth else ''}</p>
 {_table_html(table)}
 <img src="{_measurement_figure(table)}">
 <h2>Cost per frame</h2><img src="{_cost_figure(fits)}">

@@ -15,14 +15,23 @@ REPORTED = ("stature", "arm_span", "shoulder_breadth", "chest_circumference", "w
 
 
 def measurement_table(model, fits: dict, truth: dict | None = None) -> dict:
-    """{name: {"per_frame": {frame: value}, "mean", "std", "unit", "truth", "error"}}.
+    """{name: {"per_frame": {frame: value}, "mean", "std", "unit", "truth", "error", ...}}.
 
     Lengths in millimetres, mass in kilograms. ``fits`` {frame: FrameFit}; ``truth`` the
-    session's ``truth/measurements.json`` (metres, kg) or None; ``error`` = mean − truth.
+    session's ``truth/measurements.json`` (metres, kg) or None. ``truth`` is the true
+    person measured by the same definitions as the fit (the file's ``"studio"`` entry,
+    :func:`studio.simulate.session.studio_truth`) when the session has it, else the
+    file's top-level value (the simulator's Anny definitions: waist from Anny's
+    anthropometry, chest/hips from slices of Anny's T-pose); ``truth_source`` says which
+    ("studio", "anny" or None). ``truth_anny`` is always the top-level value (or None);
+    ``error`` = mean − truth and ``error_anny`` = mean − truth_anny.
     """
     from studio.body import measure
 
     per = {f: measure(model, fit.shape) for f, fit in sorted(fits.items())}
+    same = (truth or {}).get("studio") or {}
+    if not isinstance(same, dict):
+        raise ValueError(f"truth measurements: 'studio' must be a mapping name → value, got {type(same).__name__}")
     out = {}
     for name in REPORTED:
         scale, unit = (1.0, "kg") if name == "mass" else (1000.0, "mm")
@@ -34,16 +43,29 @@ def measurement_table(model, fits: dict, truth: dict | None = None) -> dict:
             "std": float(vals.std(ddof=1)) if len(vals) > 1 else 0.0,
             "truth": None,
             "error": None,
+            "truth_source": None,
+            "truth_anny": None,
+            "error_anny": None,
         }
-        if truth is not None and name in truth and truth[name] is not None:
-            row["truth"] = float(truth[name]) * scale
+        if truth is not None and truth.get(name) is not None:
+            row["truth_anny"] = float(truth[name]) * scale
+            row["error_anny"] = row["mean"] - row["truth_anny"]
+        if same.get(name) is not None:
+            row["truth"], row["truth_source"] = float(same[name]) * scale, "studio"
+        elif row["truth_anny"] is not None:
+            row["truth"], row["truth_source"] = row["truth_anny"], "anny"
+        if row["truth"] is not None:
             row["error"] = row["mean"] - row["truth"]
         out[name] = row
     return out
 
 
 def write_measurements(folder: Path, table: dict) -> tuple[Path, Path]:
-    """``measurements.json`` and ``measurements.csv`` (name, unit, mean, std, truth, error, per-frame)."""
+    """``measurements.json`` and ``measurements.csv``.
+
+    CSV columns: name, unit, mean, std, truth, error, truth_anny, error_anny, then one
+    column per frame (rows of tables without the ``truth_anny`` keys leave them empty).
+    """
     import csv
     import io
     import os
@@ -57,10 +79,12 @@ def write_measurements(folder: Path, table: dict) -> tuple[Path, Path]:
     frames = sorted({f for row in table.values() for f in row["per_frame"]}, key=int)
     buf = io.StringIO()
     w = csv.writer(buf)
-    w.writerow(["name", "unit", "mean", "std", "truth", "error"] + [f"frame_{f}" for f in frames])
+    w.writerow(["name", "unit", "mean", "std", "truth", "error", "truth_anny", "error_anny"]
+               + [f"frame_{f}" for f in frames])
     for name, row in table.items():
         fmt = (lambda v: "" if v is None else f"{v:.2f}")
-        w.writerow([name, row["unit"], fmt(row["mean"]), fmt(row["std"]), fmt(row["truth"]), fmt(row["error"])]
+        w.writerow([name, row["unit"], fmt(row["mean"]), fmt(row["std"]), fmt(row["truth"]), fmt(row["error"]),
+                    fmt(row.get("truth_anny")), fmt(row.get("error_anny"))]
                    + [fmt(row["per_frame"].get(f)) for f in frames])
     cp = folder / "measurements.csv"
     tmp = cp.with_name(cp.name + ".tmp")

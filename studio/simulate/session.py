@@ -10,6 +10,11 @@ Layout (DESIGN.md "Capture session", written with :class:`rigs.session.SessionWr
     truth/parts.npy                 (V,) uint8 body part per vertex (+ truth/scene.json names)
     truth/lights.json, truth/measurements.json, truth/scene.json, truth/calibration.json
 
+``truth/measurements.json`` holds the body file's measurements (Anny's definitions, see
+:mod:`studio.simulate.truth_build`) and, when the body file has the canonical postures
+(``rest_q``, ``tpose_q``), a ``"studio"`` entry {name: value}: the same person measured by
+:func:`studio.body.measure`'s definitions (:func:`studio_truth`).
+
 The session itself is clean (every frame complete, nominal timestamps); the ``sensor``
 section's ``drop`` and ``jitter_ns`` are echoed in ``session.json`` metadata
 (``simulation.sensor``) for the ``simulated`` rig backend to apply at playback.
@@ -34,7 +39,7 @@ from studio.simulate.scene import Scene
 from studio.simulate.sensor import apply_sensor
 from studio.simulate.spec import SimSpec, load_spec
 
-__all__ = ["simulate", "ensure_rendered", "default_cache_dir", "TRUTH_VERSION"]
+__all__ = ["simulate", "ensure_rendered", "default_cache_dir", "studio_truth", "TRUTH_VERSION"]
 
 log = logging.getLogger(__name__)
 
@@ -146,6 +151,10 @@ def _write_static_truth(scene: Scene, truth: Path, seed: int) -> None:
     _atomic_json(truth / "lights.json", {"ambient": scene.ambient, "lights": lights,
                                          "ground": {"normal": [0.0, 0.0, 1.0], "offset": 0.0}})
     meas = json.loads(str(body.extra["measurements"])) if "measurements" in body.extra else {}
+    same = studio_truth(body.extra, meas.get("sex"))
+    if same is not None:
+        meas["studio"] = same
+        meas["studio_source"] = STUDIO_TRUTH_SOURCE
     _atomic_json(truth / "measurements.json", meas)
     phen = {}
     if "phenotype_names" in body.extra:
@@ -159,6 +168,36 @@ def _write_static_truth(scene: Scene, truth: Path, seed: int) -> None:
         "source": str(body.extra.get("source", "")),
         "labels": {"0": "background", "1": "person", "2": "shadow"},
     })
+
+
+STUDIO_TRUTH_SOURCE = (
+    "studio.body.measure definitions on the true body: body.npz rest_q (Anny rest pose = the "
+    "model's default pose) and tpose_q (upper arms horizontal, elbows straight) mapped into the "
+    "model topology (anny_correspondence), joints by the model's joint regressor"
+)
+
+
+def studio_truth(extra: dict, sex: str | None = None) -> dict[str, float] | None:
+    """Same-definition truth {name: value} (metres, kg) of a ``body.npz``, or None.
+
+    ``extra``: the body file's arrays (``rest_q``, ``tpose_q`` (13348, 3) int16 in units
+    of ``scale``); None when the file predates them. The measurements are
+    :func:`studio.body.measure.measure_anny_body` — exactly what
+    :func:`studio.body.measure` reports for a fitted body — so that fit errors measure
+    the fit, not differing definitions. ``sex`` picks the model whose topology is used
+    (all genders share it; default neutral).
+    """
+    if "rest_q" not in extra or "tpose_q" not in extra:
+        return None
+    from studio.body import BodyModel
+    from studio.body.measure import measure_anny_body
+
+    scale = float(extra["scale"])
+    gender = sex if sex in ("male", "female") else "neutral"
+    model = BodyModel.load(gender)
+    rest = np.asarray(extra["rest_q"], dtype=np.float64) * scale
+    tpose = np.asarray(extra["tpose_q"], dtype=np.float64) * scale
+    return measure_anny_body(model, rest, tpose)
 
 
 def _write_body(scene: Scene, truth: Path, index: int, frame: int) -> None:

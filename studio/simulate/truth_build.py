@@ -14,10 +14,20 @@ float32 world-aligned axis-angle deltas of the bones named in ``pose_bones`` (An
 / ``phenotype_values``, ``pose_names`` (T,), ``rest_height`` (V,) float16 height of each vertex in the rest pose
 as a fraction of stature (for clothing regions) and ``measurements`` (a JSON string).
 
+``rest_q`` / ``tpose_q`` (V, 3) int16 (units of ``scale``)
+    the person in Anny's own frame (Z up, facing -Y, left = +X, not placed on the floor) in
+    the canonical postures the toolkit measures in: Anny's rest pose (the posture the body
+    model's template and default pose were built from) and a T-pose by the toolkit's
+    definition (:func:`straight_t_pose`: upper arms horizontal, elbows straight, hands rigid
+    with the forearms). :mod:`studio.simulate.session` maps them into the model's topology
+    and measures them with :func:`studio.body.measure_anny_body` (same-definition truth).
+
 The people's phenotypes are drawn from Anny's population model (``anny.shape_distribution``,
 adult ages, seeded). The truth is independent of the SCAPE model we fit (``studio.body`` is
 never imported here): measurements come from Anny's ``anthropometry`` (rest pose) and from
-convex-hull slices of the T-pose mesh (chest, hips).
+convex-hull slices of the T-pose mesh (chest, hips). Anny's ``STATIC_POSES["t_pose"]`` keeps
+the elbows bent about 43° (forearms forward); the measurement T-pose ``tpose_q`` straightens
+them, which for the walk's woman lengthens the fingertip span by about 18 cm.
 """
 
 from __future__ import annotations
@@ -30,7 +40,7 @@ from pathlib import Path
 
 import numpy as np
 
-__all__ = ["SEQUENCES", "build_truth", "PART_NAMES", "QUANT_SCALE"]
+__all__ = ["SEQUENCES", "build_truth", "straight_t_pose", "PART_NAMES", "QUANT_SCALE"]
 
 log = logging.getLogger(__name__)
 
@@ -186,6 +196,66 @@ def _posed(model, poses: list[dict[str, np.ndarray]], phenotype: dict) -> tuple[
     return V, rest
 
 
+def _shortest_arc(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """(3, 3) rotation turning direction ``a`` onto direction ``b`` about ``a × b``."""
+    import cv2
+
+    a = a / np.linalg.norm(a)
+    b = b / np.linalg.norm(b)
+    axis = np.cross(a, b)
+    s = np.linalg.norm(axis)
+    if s < 1e-12:
+        return np.eye(3)
+    return cv2.Rodrigues(axis / s * math.atan2(s, float(a @ b)))[0]
+
+
+def _subtree(parents: list[int], root: int) -> list[int]:
+    """Indices of bone ``root`` and all its descendants."""
+    out = [root]
+    for b, p in enumerate(parents):  # parents precede children in Anny's bone order
+        if p in out and b not in out:
+            out.append(b)
+    return out
+
+
+def straight_t_pose(model, phenotype: dict) -> tuple[np.ndarray, np.ndarray]:
+    """Rest vertices (V, 3) and the toolkit's measurement T-pose (V, 3), Anny's frame.
+
+    The T-pose is the definition of ``studio.body.measure.t_pose``: each upper arm turned by
+    the shortest rotation that makes the shoulder → elbow direction horizontal (±X), each
+    forearm turned so that elbow → wrist continues it (elbow straight), hands and fingers
+    rigid with the forearm. Joints are Anny's rest bone heads (``upperarm01``,
+    ``lowerarm01``, ``wrist``: the centres the body model's joint regressor was trained on)
+    and the rest vertices are skinned with Anny's own linear blend skinning, as in the body
+    model's pose training (``studio.body.build.anny_bone_transforms``).
+    """
+    import torch
+
+    pk = {k: torch.full((1,), float(v), dtype=model.dtype) for k, v in phenotype.items()}
+    with torch.no_grad():
+        out = model(pose_parameters=None, phenotype_kwargs=pk)
+    rest = out["rest_vertices"][0].cpu().numpy().astype(np.float64)
+    heads = out["rest_bone_heads"][0].cpu().numpy().astype(np.float64)
+    labels = list(model.bone_labels)
+    parents = [int(p) for p in model.bone_parents]
+    T = np.broadcast_to(np.eye(4), (len(labels), 4, 4)).copy()
+    for side, sign in (("L", 1.0), ("R", -1.0)):
+        iu, il, iw = (labels.index(f"{b}.{side}") for b in ("upperarm01", "lowerarm01", "wrist"))
+        s, e, w = heads[iu], heads[il], heads[iw]
+        Ru = _shortest_arc(e - s, np.array([sign, 0.0, 0.0]))
+        Rl = Ru @ _shortest_arc(w - e, e - s)
+        e_posed = s + Ru @ (e - s)
+        lower = set(_subtree(parents, il))
+        for b in _subtree(parents, iu):
+            R, pivot, moved = (Rl, e, e_posed) if b in lower else (Ru, s, s)
+            T[b, :3, :3] = R
+            T[b, :3, 3] = moved - R @ pivot
+    with torch.no_grad():
+        V = model.get_skinned_vertices(torch.as_tensor(rest[None], dtype=model.dtype),
+                                       torch.as_tensor(T[None], dtype=model.dtype))
+    return rest, V[0].cpu().numpy().astype(np.float64)
+
+
 def _slice_perimeter(V: np.ndarray, F: np.ndarray, z: float, keep) -> float:
     """Tape-measure perimeter: convex hull of the mesh cross-section at height z."""
     import cv2
@@ -281,6 +351,7 @@ def build_truth(out_dir: str | Path, names: list[str] | None = None, progress=No
         V, rest = _posed(model, list(poses), anny_phen)
         tpose, _ = _posed(model, [STATIC_POSES["t_pose"]], anny_phen)
         meas = _measurements(model, rest, tpose[0], F)
+        rest_m, tpose_m = straight_t_pose(model, anny_phen)
         meas["sex"] = "female" if phen["gender"] > 0.5 else "male"
         meas["age_years"] = phen["morphological_age_years"]
         n = len(poses)
@@ -304,7 +375,8 @@ def build_truth(out_dir: str | Path, names: list[str] | None = None, progress=No
         rotvecs = np.array([[p.get(b, np.zeros(3)) for b in pose_bones] for p in poses],
                            dtype=np.float32).reshape(n, len(pose_bones), 3)
         q = np.round(world / QUANT_SCALE)
-        if np.abs(q).max() > 32767:
+        canon = np.round(np.stack([rest_m, tpose_m]) / QUANT_SCALE)
+        if max(np.abs(q).max(), np.abs(canon).max()) > 32767:
             raise RuntimeError(f"{name}: vertices exceed the int16 range of ±3.27 m")
         folder = Path(out_dir) / name
         folder.mkdir(parents=True, exist_ok=True)
@@ -320,6 +392,7 @@ def build_truth(out_dir: str | Path, names: list[str] | None = None, progress=No
             bob=np.asarray(bobs, dtype=np.float32),
             measurements=np.array(json.dumps(meas)),
             rest_height=((rest[:, 2] - rest[:, 2].min()) / meas["stature"]).astype(np.float16),
+            rest_q=canon[0].astype(np.int16), tpose_q=canon[1].astype(np.int16),
             source=np.array(f"anny {anny.__version__} topology anny-noeyes-notongue, pose "
                             "parameterisation local-ref (world-aligned deltas)"),
         )

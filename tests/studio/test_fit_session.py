@@ -52,7 +52,8 @@ def make_session(path, *, calibration=True, segmentation=True, n_frames=2):
 
 
 TINY = FitOptions(levels=(2, 1, 0), n_particles=16, n_layers=3, n_particles_tracking=12, n_layers_tracking=2,
-                  nm_evaluations=8, final_evaluations=10, n_shape_free=2, partition_particles=8, partition_layers=2)
+                  nm_evaluations=8, final_evaluations=10, n_shape_free=2, partition_particles=8, partition_layers=2,
+                  limb_particles=6, limb_layers=1)
 
 
 def test_missing_segmentation_or_calibration_is_named(tmp_path, capsys):

@@ -26,13 +26,13 @@
 
 from __future__ import annotations
 
-import functools
 import logging
 import time
 from dataclasses import asdict, dataclass, field
 
 import numpy as np
 
+from studio.blas import one_blas_thread
 from studio.body import BodyModel
 from studio.body.skeleton import JOINT_KIND, POSE_SIZE, pose_slices
 from studio.cost import SilhouetteTarget
@@ -58,7 +58,9 @@ class FitOptions:
     full-resolution stage to 900 evaluations (it had not converged: cost 0.72 → 0.52) took the
     silhouette precision / recall vs the true labels from 0.935 / 0.950 to 0.950 / 0.957, the
     surface distance to 7.8 mm and the joint error from 24.4 to 20.2 mm (frames 0, 6, 12, 18).
-    Measured without gain: 20 free shape coefficients (frame 0: precision 0.927 → 0.910), a
+    Measured without gain: 15 free shape coefficients (24-frame walk: arm span error +31.8 →
+    +18.9 mm, but stature −8.8 → −10.5 mm, precision 0.965 → 0.962, joints 15.6 → 19.2 mm),
+    20 free shape coefficients (frame 0: precision 0.927 → 0.910), a
     ">1/2" instead of "≥1/2" coarse observed mask (frame 0: 0.927 → 0.927), a root + shape
     polish after the final stage (0.927 → 0.926). The shape prior (eq. 6.8) is flat within 3 σ
     and the shape is bounded to ±3 σ, so ``prior_weight`` does not act on the shape.
@@ -219,23 +221,7 @@ def build_targets(masks, names, options: FitOptions) -> dict:
             for lvl in sorted(set(options.levels))}
 
 
-def _one_blas_thread(fn):
-    """Run ``fn`` with OpenBLAS on one thread: the fit's matrix products are small and the
-    library's threads only spin — measured on a tracked walk frame: 19.9 s wall / 37.1 s CPU
-    with the default two threads, 18.9 s / 20.9 s with one, so worker processes no longer
-    fight over the cores."""
-
-    @functools.wraps(fn)
-    def wrapper(*args, **kwargs):
-        from threadpoolctl import threadpool_limits
-
-        with threadpool_limits(limits=1, user_api="blas"):
-            return fn(*args, **kwargs)
-
-    return wrapper
-
-
-@_one_blas_thread
+@one_blas_thread  # measured: 2 OpenBLAS threads only spin (see studio.blas)
 def fit_frame(
     model: BodyModel,
     cameras,
@@ -286,8 +272,8 @@ def fit_frame(
     n_free = options.n_shape_free if options.fit_shape else 0
     n_free = min(n_free, model.n_shape)
     pose_obj = FrameObjective(model, cameras, targets, base_shape, 0, options.prior_weight)
-    # the global search may score the 15-cone model instead (§4.8.1); the initial headings and
-    # the partitioned passes stay on SCAPE (measured: cones alone can lock onto a flipped pose)
+    # the global search scores the 15-cone model (§4.8.1) by default; the heading grid, the
+    # check of the cones' answer and the partitioned passes score SCAPE
     apf_obj = (CylinderObjective(model, cameras, targets, base_shape, 0, options.prior_weight)
                if options.search_model == "cylinder" else pose_obj)
     timings["targets"] = time.perf_counter() - t_start

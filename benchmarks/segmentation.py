@@ -311,7 +311,10 @@ _SPEED: dict = {}
 
 
 def _speed_init(models, calib):
+    from studio.blas import limit_blas_threads
+
     cv2.setNumThreads(1)
+    limit_blas_threads()  # as studio segment's workers do
     _SPEED["models"] = models
     _SPEED["voter"] = ShadowVoter(calib)
 

@@ -1,10 +1,12 @@
 """OpenBLAS threads: one per process for the toolkit's small matrix products.
 
-The fit's and the segmentation's products are small; OpenBLAS's own threads (one per core
-by default) only spin on them. Measured on 2 cores: a tracked walk frame took 19.9 s wall /
-37.1 s CPU with the default threads and 18.9 s / 20.9 s with one; ``studio segment`` of 24
-walk frames with 2 workers 7.0 s → 4.9 s. With one thread each, worker processes no longer
-fight over the cores.
+The fit's products are small; OpenBLAS's own threads (one per core by default) only spin
+on them. Measured on 2 cores: a tracked walk frame took 19.9 s wall / 37.1 s CPU with the
+default threads and 18.9 s / 20.9 s with one, so the fit always runs with one
+(:func:`one_blas_thread`). Segmentation gains a little from the threads in one process
+(31.7 vs 29.9 multi-frames/s) but not when a worker process runs on every core
+(``studio segment`` of 24 walk frames with 2 workers: 7.0 s → 5.2 s with one thread per
+worker), so only its workers limit them (:func:`limit_blas_threads`).
 """
 
 from __future__ import annotations

@@ -31,7 +31,7 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-from studio.blas import limit_blas_threads, one_blas_thread
+from studio.blas import limit_blas_threads
 from studio.segment.background import BackgroundModel
 from studio.segment.classify import PERSON, SHADOW, Thresholds
 from studio.segment.errors import SegmentationError
@@ -91,7 +91,7 @@ _STATE: dict = {}
 
 def _init_worker(state: dict) -> None:
     cv2.setNumThreads(1)
-    limit_blas_threads()
+    limit_blas_threads()  # one process per core: BLAS threads would only compete (studio.blas)
     _setup_state(state)
 
 
@@ -260,7 +260,6 @@ def _skin_models(session, state: dict, frames: list[int], options: SegmentOption
     return models
 
 
-@one_blas_thread
 def segment_session(
     path: str | Path,
     options: SegmentOptions = SegmentOptions(),

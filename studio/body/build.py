@@ -28,6 +28,7 @@ import scipy.sparse as sp
 
 from studio.body import scape, skeleton
 from studio.body.skeleton import JOINT_KIND, PART_NAMES, PART_PARENTS
+from studio.body.storage import save_model_file
 
 log = logging.getLogger(__name__)
 
@@ -556,7 +557,7 @@ def build_models(
         anny_map_indptr=M.indptr.astype(np.int32),
         anny_n_vertices=np.array(M.shape[1]),
     )
-    _save_npz(out_dir / "scape_models.npz", arrays)
+    save_model_file(out_dir / "scape_models.npz", arrays)
     say("measuring bodies sampled from each shape prior (inverse map)")
     add_measurement_samples(out_dir / "scape_models.npz", n=120, seed=seed)
     summary["file_bytes"] = os.path.getsize(out_dir / "scape_models.npz")
@@ -613,15 +614,6 @@ def _joint_regressor(X, Ft, fpart, vpart, Y, J, J0, radius: float = 0.09, ridge:
     return W
 
 
-def _save_npz(path: Path, arrays: dict[str, np.ndarray]) -> None:
-    tmp = path.with_name(path.name + ".tmp.npz")
-    with open(tmp, "wb") as fh:
-        np.savez_compressed(fh, **arrays)
-        fh.flush()
-        os.fsync(fh.fileno())
-    os.replace(tmp, path)
-
-
 def add_measurement_samples(path: Path, n: int = 120, seed: int = 0) -> None:
     """Measure n prior samples per population and store them in the model file."""
     from studio.body.inverse import measurement_samples
@@ -636,7 +628,7 @@ def add_measurement_samples(path: Path, n: int = 120, seed: int = 0) -> None:
         arrays[f"{g}/meas_shapes"] = shapes.astype(np.float32)
         arrays[f"{g}/meas_values"] = values.astype(np.float32)
         _CACHE.pop((str(path), g), None)
-    _save_npz(path, arrays)
+    save_model_file(path, arrays)
 
 
 def symmetrize_joint_regressor(W: np.ndarray, mirror: np.ndarray) -> np.ndarray:

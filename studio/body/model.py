@@ -21,6 +21,7 @@ import numpy as np
 
 from studio.body import scape, skeleton
 from studio.body.skeleton import PART_NAMES, PART_PARENTS, POSE_SIZE
+from studio.body.storage import dequantize_blocks
 
 log = logging.getLogger(__name__)
 
@@ -143,7 +144,8 @@ class BodyModel:
                     parts=z["vertex_parts"].astype(np.int64),
                     face_parts=z["face_parts"].astype(np.int64),
                     D_mean=z[f"{gender}/D_mean"],
-                    D_basis=z[f"{gender}/D_basis"],
+                    D_basis=(dequantize_blocks(z[f"{gender}/D_basis_q"], z[f"{gender}/D_basis_scale"])
+                             if f"{gender}/D_basis_q" in z.files else z[f"{gender}/D_basis"]),
                     eigenvalues=z[f"{gender}/eigenvalues"],
                     hinge_axes=z["hinge_axes"],
                     pose_limits=z["pose_limits"],

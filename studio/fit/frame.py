@@ -88,14 +88,12 @@ class FitOptions:
     n_layers_tracking: int = 5
     nm_evaluations: int = 240
     final_evaluations: int = 900
-    refine_particles: int = 0
     partition_particles: int = 40
     tracking_budget: float = 0.5
     partition_layers: int = 4
     limb_particles: int = 32
     limb_layers: int = 4
     rival_heading: bool = True
-    refine_layers: int = 0
     n_shape_free: int = 10
     fit_shape: bool = True
     prior_weight: float = 1.0
@@ -175,10 +173,10 @@ def _partitions() -> list[list[int]]:
     return [list(range(3)) + idx(0, 1, 2), idx(3, 4, 5), idx(6, 7, 8), idx(9, 10, 11), idx(12, 13, 14)]
 
 
-def _partitioned_search(cost, x, sigma, lo, hi, groups, *, n_particles, n_layers, rng) -> np.ndarray:
+def _partitioned_search(cost, x, sigma, lo, hi, groups, *, n_particles, n_layers, rng) -> tuple[np.ndarray, float]:
     """Deutscher's partitioned annealed particle filter: re-search each index group of ``x``
     in turn with the others held; a group's answer is kept only if it lowers ``cost``
-    ((N, D) → (N,))."""
+    ((N, D) → (N,)). Returns the parameters and their cost."""
     x = np.asarray(x, dtype=np.float64).copy()
     current = float(cost(x[None])[0])
     for idx in groups:
@@ -193,7 +191,7 @@ def _partitioned_search(cost, x, sigma, lo, hi, groups, *, n_particles, n_layers
                                      n_layers=n_layers, vectorized=True, seed=rng)
         if r.cost < current:
             x[idx], current = r.x, float(r.cost)
-    return x
+    return x, current
 
 
 def _heading(pose: np.ndarray) -> float:
@@ -256,11 +254,11 @@ def fit_frame(
     t_start = time.perf_counter()
     timings = {}
     init_height = None
+    xy = hull_centroid(cameras, masks) if previous_pose is None or shape is None else None
     if shape is not None:
         base_shape = model.check_shape(shape)
     elif options.fit_shape and model.measurement_samples is not None:
         # stature from the top of the visual hull → conditional-mean shape (§4.7.2-style init)
-        xy = hull_centroid(cameras, masks)
         height = hull_height(cameras, masks, xy)
         base_shape = shape_from_measurements(model, {"stature": height}, refine=0)
         base_shape = np.clip(base_shape, -2.5 * np.sqrt(model.eigenvalues), 2.5 * np.sqrt(model.eigenvalues))
@@ -281,7 +279,7 @@ def fit_frame(
     # -- initialisation + particle filter on the pose (shape held)
     t = time.perf_counter()
     if previous_pose is None:
-        grid, _ = initial_poses(pose_obj, cameras, masks, search, keep=None)
+        grid, _ = initial_poses(pose_obj, cameras, masks, search, keep=None, xy=xy)
         starts = grid[:4]
         if hint_pose is not None:
             hint = np.asarray(hint_pose, dtype=np.float64).copy()
@@ -311,10 +309,12 @@ def fit_frame(
         # partitioned refinement (Deutscher's partitioned APF): torso+root, then limb by limb
         if options.partition_particles and options.partition_layers:
             scale = 0.5 if previous_pose is None else 0.3
-            x = _partitioned_search(lambda X: pose_obj(X, search), x, sigma * scale, lo, hi, _partitions(),
-                                    n_particles=options.partition_particles, n_layers=options.partition_layers,
-                                    rng=rng)
-        return x, float(pose_obj(x[None], search)[0]), float(apf.cost)
+            x, c = _partitioned_search(lambda X: pose_obj(X, search), x, sigma * scale, lo, hi, _partitions(),
+                                       n_particles=options.partition_particles, n_layers=options.partition_layers,
+                                       rng=rng)
+        else:
+            c = float(pose_obj(x[None], search)[0])
+        return x, c, float(apf.cost)
 
     x_pose, c_pose, apf_cost = search_from(starts)
     rival_cost = None
@@ -338,14 +338,6 @@ def fit_frame(
     sig = np.sqrt(model.eigenvalues[:n_free])
     blo = np.concatenate([lo, -3 * sig])
     bhi = np.concatenate([hi, 3 * sig])
-    if options.refine_particles and options.refine_layers:
-        t2 = time.perf_counter()
-        apf2 = annealed_particle_filter(
-            lambda X: obj(X, refine), x0, np.concatenate([_pose_sigma(0.3), 0.5 * sig]), bounds=(blo, bhi),
-            n_particles=options.refine_particles, n_layers=options.refine_layers, vectorized=True, seed=rng,
-        )
-        x0 = apf2.x
-        timings["particle_filter_refine"] = time.perf_counter() - t2
     shape_idx = list(range(POSE_SIZE, POSE_SIZE + n_free))
     stages = thesis_stages(list(range(6)), _part_groups(), shape_idx, n_shape_first=min(6, n_free),
                            n_shape_second=n_free, max_evaluations=options.nm_evaluations)
@@ -361,7 +353,7 @@ def fit_frame(
         # way is a local minimum Nelder–Mead cannot leave (measured on the walk: wrist 205 mm off).
         # Tracking too: without it the 24-frame walk's joint error went 17.2 → 19.1 mm and
         # precision 0.961 → 0.956 (the cost rose on 17 of 23 tracked frames)
-        x_nm = _partitioned_search(lambda X: obj(X, refine), x_nm, np.concatenate([sigma, sig]) * 0.5, blo, bhi,
+        x_nm, _ = _partitioned_search(lambda X: obj(X, refine), x_nm, np.concatenate([sigma, sig]) * 0.5, blo, bhi,
                                    _partitions()[1:], n_particles=options.limb_particles,
                                    n_layers=options.limb_layers, rng=rng)
     timings["nelder_mead"] = time.perf_counter() - t

@@ -88,15 +88,16 @@ def stride_poses(model) -> np.ndarray:
 
 
 def initial_poses(objective, cameras, masks, level: int, *, n_headings: int = 12, keep: int | None = 4,
-                  shape=None) -> tuple[np.ndarray, np.ndarray]:
+                  shape=None, xy=None) -> tuple[np.ndarray, np.ndarray]:
     """Starts (keep, D) for the particle filter and their costs (keep,), best first.
 
     Every heading of ``n_headings`` is scored in each posture of :func:`stride_poses` (a
     person in mid-stride seen in the standing posture looks best side-on, so the standing
     posture alone picks the wrong heading); the best posture per heading is kept and the
-    ``keep`` best headings are returned (``None``: every heading).
+    ``keep`` best headings are returned (``None``: every heading). ``xy``: the floor position
+    (default: :func:`hull_centroid` of the masks).
     """
-    xy = hull_centroid(cameras, masks)
+    xy = hull_centroid(cameras, masks) if xy is None else xy
     postures = stride_poses(objective.model)
     postures[:, :2] = xy
     yaws = np.linspace(-np.pi, np.pi, n_headings, endpoint=False)

@@ -149,15 +149,16 @@ def test_partitioned_search_leaves_each_groups_local_minimum():
     x0 = np.zeros(6)
     lo, hi = np.full(6, -4.0), np.full(6, 4.0)
     rng = np.random.default_rng(3)
-    x = _partitioned_search(cost, x0, np.full(6, 1.5), lo, hi, [[0, 1], [2, 3], [4]], n_particles=60, n_layers=6,
-                            rng=rng)
+    x, c = _partitioned_search(cost, x0, np.full(6, 1.5), lo, hi, [[0, 1], [2, 3], [4]], n_particles=60, n_layers=6,
+                               rng=rng)
     # every searched coordinate is in its global basin (deeper than the local minimum's −1)
     per_coordinate = -np.exp(-x[:5] ** 2 / 0.1) - 3 * np.exp(-(x[:5] - 2.5) ** 2 / 0.1)
     assert np.all(per_coordinate < -1.5), x
     assert x[5] == 0.0  # not in any group: held
+    assert c == pytest.approx(cost(x[None])[0], rel=1e-12)  # the returned cost is the answer's
     # a group whose search does not lower the cost keeps its value
-    y = _partitioned_search(cost, np.full(6, 2.5), np.full(6, 0.01), lo, hi, [[0]], n_particles=10, n_layers=2,
-                            rng=rng)
+    y, _ = _partitioned_search(cost, np.full(6, 2.5), np.full(6, 0.01), lo, hi, [[0]], n_particles=10, n_layers=2,
+                               rng=rng)
     assert y[0] == 2.5
 
 

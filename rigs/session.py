@@ -81,6 +81,7 @@ __all__ = [
     "ValidationReport",
     "SESSION_FORMAT",
     "SESSION_VERSION",
+    "index_name",
 ]
 
 log = logging.getLogger(__name__)
@@ -113,7 +114,8 @@ def _now() -> str:
     return datetime.now(timezone.utc).isoformat(timespec="milliseconds")
 
 
-def _index_name(index: int) -> str:
+def index_name(index: int) -> str:
+    """File stem of frame ``index`` (``000042``): the one place a frame number is formatted."""
     return f"{index:0{INDEX_DIGITS}d}"
 
 
@@ -324,11 +326,11 @@ class SessionWriter:
 
     def frame_path(self, camera: str, index: int, suffix: str = ".png") -> Path:
         """Where frame ``index`` of ``camera`` is stored (``suffix`` ``.png`` or ``.exr``)."""
-        return self._path / FRAMES_DIR / camera / f"{_index_name(index)}{suffix}"
+        return self._path / FRAMES_DIR / camera / f"{index_name(index)}{suffix}"
 
     def background_path(self, camera: str, index: int, suffix: str = ".png") -> Path:
         """Where background frame ``index`` of ``camera`` is stored."""
-        return self._path / BACKGROUND_DIR / camera / f"{_index_name(index)}{suffix}"
+        return self._path / BACKGROUND_DIR / camera / f"{index_name(index)}{suffix}"
 
     # ------------------------------------------------------------------ writing
     def _check_writable(self, what: str) -> None:
@@ -983,7 +985,7 @@ class Session:
 
 
 def _find_image(folder: Path, index: int, suffix: str | None) -> Path:
-    name = _index_name(index)
+    name = index_name(index)
     if suffix in imageio.IMAGE_SUFFIXES:
         return folder / f"{name}{suffix}"
     for candidate in imageio.IMAGE_SUFFIXES:

@@ -146,12 +146,24 @@ def atomic_open(
                 yield f
 
 
+def _write_all(fd: int, data: bytes | memoryview) -> None:
+    """Write every byte of ``data`` to ``fd`` (``os.write`` may write fewer)."""
+    view = memoryview(data)
+    while view:
+        n = os.write(fd, view)
+        view = view[n:]
+
+
 def atomic_write_bytes(path: str | PathLike, data: bytes | memoryview, *, fsync: bool = True,
                        mkdir: bool = False) -> Path:
     """Write ``data`` to ``path`` atomically (see the module docstring); return ``path``."""
     path = Path(path)
-    with atomic_open(path, "wb", fsync=fsync, mkdir=mkdir) as f:
-        f.write(data)
+    with atomic_path(path, fsync=fsync, mkdir=mkdir) as tmp:
+        fd = os.open(tmp, os.O_WRONLY | os.O_TRUNC)
+        try:
+            _write_all(fd, data)
+        finally:
+            os.close(fd)
     return path
 
 

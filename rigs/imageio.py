@@ -18,7 +18,7 @@ EXR channel names: 1 channel ``Y``; 2 channels ``Y, A``; 3 ``R, G, B``; 4 ``R, G
 A foreign EXR with other channel names is read as a single channel (2-D) when it has one
 channel, else its channels stacked in alphabetical order.
 
-Every write goes to a hidden temporary file in the destination folder (``.NAME.tmp-PID-N``)
+Every write goes through :mod:`rigs.atomic` (a unique hidden temporary file in the destination folder)
 that is then renamed over ``NAME`` with :func:`os.replace`, so a reader never sees a torn
 file under the final name, whatever instant the writer dies at. ``fsync=True`` also flushes
 the file and its folder to stable storage before/after the rename (survives power loss, costs
@@ -33,7 +33,6 @@ the default zlib strategy takes ≈ 19 ms at level 1.
 from __future__ import annotations
 
 import errno
-import itertools
 import json
 import logging
 import os
@@ -44,6 +43,8 @@ from typing import Any
 
 import cv2
 import numpy as np
+
+from rigs.atomic import atomic_path, atomic_write_bytes, atomic_write_text
 
 __all__ = [
     "ImageIOError",
@@ -67,7 +68,6 @@ PNG_IEND = b"\x00\x00\x00\x00IEND\xaeB`\x82"
 EXR_MAGIC = b"\x76\x2f\x31\x01"
 
 _EXR_LAYOUTS = {1: ("Y",), 2: ("Y", "A"), 3: ("R", "G", "B"), 4: ("R", "G", "B", "A")}
-_tmp_counter = itertools.count()
 
 
 class ImageIOError(ValueError):
@@ -92,70 +92,7 @@ class ImageInfo:
 
 
 # --------------------------------------------------------------------------- atomic writes
-
-
-def _tmp_path(path: Path) -> Path:
-    return path.with_name(f".{path.name}.tmp-{os.getpid()}-{next(_tmp_counter)}")
-
-
-def _write_all(fd: int, data: bytes | memoryview) -> None:
-    """Write every byte of ``data`` to ``fd`` (``os.write`` may write fewer)."""
-    view = memoryview(data)
-    while view:
-        n = os.write(fd, view)
-        view = view[n:]
-
-
-def _fsync_dir(folder: Path) -> None:
-    fd = os.open(folder, os.O_RDONLY)
-    try:
-        os.fsync(fd)
-    finally:
-        os.close(fd)
-
-
-def _unlink_quietly(path: Path) -> None:
-    try:
-        os.unlink(path)
-    except OSError:
-        pass
-
-
-def _reraise_naming(exc: OSError, path: Path) -> OSError:
-    return OSError(exc.errno, f"{exc.strerror or exc}: writing {path}")
-
-
-def atomic_write_bytes(path: str | Path, data: bytes, *, fsync: bool = True) -> Path:
-    """Write ``data`` to ``path`` through a temporary file in the same folder + ``os.replace``.
-
-    With ``fsync`` the data and the folder entry are flushed to stable storage. On any error
-    the temporary file is removed and ``path`` is left as it was.
-    """
-    path = Path(path)
-    tmp = _tmp_path(path)
-    try:
-        fd = os.open(tmp, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o644)
-        try:
-            _write_all(fd, data)
-            if fsync:
-                os.fsync(fd)
-        finally:
-            os.close(fd)
-        os.replace(tmp, path)
-    except OSError as exc:
-        _unlink_quietly(tmp)
-        raise _reraise_naming(exc, path) from exc
-    except BaseException:
-        _unlink_quietly(tmp)
-        raise
-    if fsync:
-        _fsync_dir(path.parent)
-    return path
-
-
-def atomic_write_text(path: str | Path, text: str, *, fsync: bool = True) -> Path:
-    """UTF-8 text version of :func:`atomic_write_bytes`."""
-    return atomic_write_bytes(path, text.encode("utf-8"), fsync=fsync)
+# The one atomic writer is rigs.atomic; imageio re-exports its byte/text writers for callers.
 
 
 def atomic_write_json(path: str | Path, obj: Any, *, fsync: bool = True) -> Path:
@@ -234,30 +171,14 @@ def _write_exr(array: np.ndarray, path: Path, fsync: bool) -> None:
     else:
         data = {"RGB" if channels == 3 else "RGBA": np.ascontiguousarray(array)}
     header = {"compression": OpenEXR.ZIP_COMPRESSION, "type": OpenEXR.scanlineimage}
-    tmp = _tmp_path(path)
     try:
-        with OpenEXR.File(header, data) as exr:
-            exr.write(str(tmp))
-        if fsync:
-            fd = os.open(tmp, os.O_RDONLY)
-            try:
-                os.fsync(fd)
-            finally:
-                os.close(fd)
-        os.replace(tmp, path)
-    except OSError as exc:
-        _unlink_quietly(tmp)
-        raise _reraise_naming(exc, path) from exc
+        with atomic_path(path, fsync=fsync) as tmp:
+            with OpenEXR.File(header, data) as exr:
+                exr.write(str(tmp))
     except RuntimeError as exc:  # OpenEXR reports write failures (disk full too) this way
-        _unlink_quietly(tmp)
         if not path.parent.is_dir():
             raise OSError(errno.ENOENT, f"folder does not exist: writing {path}") from exc
         raise OSError(errno.EIO, f"OpenEXR failed ({exc}): writing {path}") from exc
-    except BaseException:
-        _unlink_quietly(tmp)
-        raise
-    if fsync:
-        _fsync_dir(path.parent)
 
 
 def write_image(

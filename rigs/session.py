@@ -72,6 +72,8 @@ from typing import Any
 import numpy as np
 
 from rigs import imageio
+from rigs import atomic
+from rigs.atomic import is_temporary
 from rigs.imageio import ImageIOError
 
 __all__ = [
@@ -509,7 +511,7 @@ class SessionWriter:
     def _append_row(self, line: bytes) -> None:
         """Append one complete line; on failure truncate back so no torn line stays."""
         try:
-            imageio._write_all(self._csv_fd, line)
+            atomic._write_all(self._csv_fd, line)
             if self._fsync:
                 os.fsync(self._csv_fd)
         except OSError:
@@ -951,7 +953,7 @@ class Session:
                 )
             for sub in (FRAMES_DIR, BACKGROUND_DIR):
                 d = self.path / sub / cam
-                tmp = [p.name for p in d.glob(".*.tmp-*")] if d.is_dir() else []
+                tmp = [p.name for p in d.iterdir() if is_temporary(p.name)] if d.is_dir() else []
                 if tmp:
                     notes.append(f"{sub}/{cam}: {len(tmp)} leftover temporary file(s) from an interrupted write")
         if self.status == "recording":

@@ -37,17 +37,24 @@ SEGMENTATION_RESERVED = frozenset({"background", "skin", "skin_models", "overlay
 
 @dataclass(frozen=True)
 class Layout:
-    """Paths of one session folder ``root`` (pure: nothing is read or created)."""
+    """Paths of one session folder (pure: nothing is read or created).
+
+    Derived outputs live under ``root``; the capture and its truth under ``source`` (the
+    session folder; by default ``root`` itself, a different folder when outputs go elsewhere,
+    e.g. ``--out`` for a read-only session).
+    """
 
     root: Path
+    source: Path | None = None
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "root", Path(self.root))
+        object.__setattr__(self, "source", Path(self.root if self.source is None else self.source))
 
     # ------------------------------------------------------------------ truth (simulated)
     @property
     def truth_dir(self) -> Path:
-        return self.root / "truth"
+        return self.source / "truth"
 
     def truth_labels(self, camera: str, index: int) -> Path:
         """True labels (0 background, 1 person, 2 shadow) of ``camera`` / frame ``index``."""

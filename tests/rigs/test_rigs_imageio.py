@@ -8,6 +8,8 @@ from pathlib import Path
 
 import cv2
 import numpy as np
+
+import rigs.atomic
 import OpenEXR
 import pytest
 
@@ -170,7 +172,7 @@ def test_disk_full_keeps_old_file_and_leaves_no_temp(tmp_path, monkeypatch):
         os.write(fd, bytes(data)[: len(data) // 2])
         raise OSError(errno.ENOSPC, "No space left on device")
 
-    monkeypatch.setattr(imageio, "_write_all", full)
+    monkeypatch.setattr(rigs.atomic, "_write_all", full)
     with pytest.raises(OSError, match=r"No space left on device: writing .*a\.png") as info:
         write_image(path, np.full((4, 4), 5, np.uint8))
     assert info.value.errno == errno.ENOSPC
@@ -204,7 +206,7 @@ def test_interrupt_during_write_leaves_no_temp(tmp_path, monkeypatch):
     def interrupted(fd, data):
         raise KeyboardInterrupt
 
-    monkeypatch.setattr(imageio, "_write_all", interrupted)
+    monkeypatch.setattr(rigs.atomic, "_write_all", interrupted)
     with pytest.raises(KeyboardInterrupt):
         atomic_write_bytes(tmp_path / "x.bin", b"abc")
     assert list(tmp_path.iterdir()) == []

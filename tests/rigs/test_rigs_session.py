@@ -8,6 +8,8 @@ import os
 from pathlib import Path
 
 import numpy as np
+
+import rigs.atomic
 import pytest
 
 from rigs import imageio
@@ -268,7 +270,7 @@ def test_create_reports_unwritable_folder(tmp_path, monkeypatch):
     def full(*args, **kwargs):
         raise OSError(errno.ENOSPC, "No space left on device")
 
-    monkeypatch.setattr(imageio, "_write_all", full)
+    monkeypatch.setattr(rigs.atomic, "_write_all", full)
     with pytest.raises(SessionError, match=r"cannot create session .*: disk full \(ENOSPC\)"):
         SessionWriter.create(tmp_path / "s", CAMS, calibration={"a": 1})
 
@@ -330,7 +332,7 @@ def test_write_rejects_size_or_dtype_change_and_duplicates(tmp_path):
 
 
 def _enospc_after(monkeypatch, calls_ok: int, partial: bool = False):
-    real = imageio._write_all
+    real = rigs.atomic._write_all
     state = {"n": 0}
 
     def flaky(fd, data):
@@ -341,7 +343,7 @@ def _enospc_after(monkeypatch, calls_ok: int, partial: bool = False):
             raise OSError(errno.ENOSPC, "No space left on device")
         real(fd, data)
 
-    monkeypatch.setattr(imageio, "_write_all", flaky)
+    monkeypatch.setattr(rigs.atomic, "_write_all", flaky)
 
 
 def test_disk_full_on_an_image_keeps_the_session_consistent(tmp_path, monkeypatch):

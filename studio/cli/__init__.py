@@ -17,7 +17,7 @@ import sys
 from studio import __version__
 from studio.cli import commands
 
-__all__ = ["main", "build_parser", "CommandError"]
+__all__ = ["main", "build_parser", "CommandError", "open_workspace"]
 
 
 class CommandError(RuntimeError):
@@ -26,6 +26,16 @@ class CommandError(RuntimeError):
     def __init__(self, message: str, code: int = 1):
         super().__init__(message)
         self.code = code
+
+
+def open_workspace(path, *, out=None):
+    """Open a session for a command (:class:`studio.workspace.Workspace`); its problems exit as one line."""
+    from studio.workspace import Workspace, WorkspaceError
+
+    try:
+        return Workspace.open(path, out=out)
+    except WorkspaceError as exc:
+        raise CommandError(str(exc)) from None
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -56,8 +66,11 @@ def main(argv: list[str] | None = None) -> int:
     if not getattr(args, "func", None):
         parser.print_help()
         return 2
+    from studio.workers import terminate_on_sigterm
+
     try:
-        code = args.func(args)
+        with terminate_on_sigterm():
+            code = args.func(args)
     except KeyboardInterrupt:
         print("studio: interrupted", file=sys.stderr)
         return 130

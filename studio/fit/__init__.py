@@ -11,7 +11,7 @@ from studio.fit.frame import FitOptions, FrameFit, fit_frame, fit_frame_gender
 from studio.fit.init import hull_centroid, initial_poses
 from studio.fit.objective import FrameObjective, pose_bounds
 from studio.fit.output import OVERLAY_COLORS, overlay_image, write_frame_fit
-from studio.fit.session import SessionInputs, fit_session, load_fits, observed_masks
+from studio.fit.session import fit_session, load_fits, open_workspace
 
 __all__ = [
     "FitError",
@@ -19,14 +19,13 @@ __all__ = [
     "FrameFit",
     "FrameObjective",
     "OVERLAY_COLORS",
-    "SessionInputs",
     "fit_frame",
     "fit_frame_gender",
     "fit_session",
     "hull_centroid",
     "initial_poses",
     "load_fits",
-    "observed_masks",
+    "open_workspace",
     "overlay_image",
     "pose_bounds",
     "write_frame_fit",

@@ -12,8 +12,6 @@
 
 from __future__ import annotations
 
-from pathlib import Path
-
 import numpy as np
 
 from studio.fit.errors import FitError
@@ -24,8 +22,9 @@ __all__ = ["joint_error", "silhouette_agreement", "surface_distance", "surface_s
 def true_mesh(session_path, frame: int) -> np.ndarray:
     """True body (V, 3) of ``frame`` in our model's topology (world metres)."""
     from studio.body import anny_correspondence
+    from studio.workspace import Layout
 
-    p = Path(session_path) / "truth" / "bodies" / f"{frame:06d}.npz"
+    p = Layout(session_path).truth_body(frame)
     if not p.is_file():
         raise FitError(f"{p}: no true body (not a simulated session?)")
     with np.load(p) as z:

@@ -11,7 +11,7 @@ from pathlib import Path
 
 import numpy as np
 
-__all__ = ["OVERLAY_COLORS", "overlay_image", "fit_paths", "write_frame_fit"]
+__all__ = ["OVERLAY_COLORS", "overlay_image", "write_frame_fit"]
 
 #: RGB colours of the overlay classes.
 OVERLAY_COLORS = {
@@ -19,14 +19,6 @@ OVERLAY_COLORS = {
     "image only": (230, 159, 0),
     "agreement": (235, 235, 235),
 }
-
-FIT_DIR = "fit"
-
-
-def fit_paths(session_path: Path, frame: int) -> dict:
-    root = Path(session_path) / FIT_DIR
-    return {"json": root / f"{frame:06d}.json", "ply": root / f"{frame:06d}.ply", "root": root}
-
 
 def overlay_image(image: np.ndarray | None, model_mask: np.ndarray, observed_mask: np.ndarray) -> np.ndarray:
     """(H, W, 3) uint8: the frame dimmed, with model-only / image-only / agreement pixels coloured."""
@@ -47,26 +39,28 @@ def overlay_image(image: np.ndarray | None, model_mask: np.ndarray, observed_mas
     return out
 
 
-def write_frame_fit(session_path: Path, fit, model, cameras, masks, images=None) -> dict:
-    """Write the JSON, the mesh and one overlay per camera of one frame fit; returns the paths."""
-    from rigs.imageio import atomic_write_json, write_image
+def write_frame_fit(layout, fit, model, cameras, masks, images=None, run: dict | None = None) -> Path:
+    """Write the mesh, one overlay per camera, then the JSON of one frame fit (the JSON last: it
+    marks the frame complete; ``run`` records the settings a rerun compares). Returns the JSON path."""
+    from rigs.atomic import atomic_write_json
+    from rigs.imageio import write_image
     from studio.body import write_mesh
     from studio.render import silhouette
 
-    paths = fit_paths(session_path, fit.frame)
-    paths["root"].mkdir(parents=True, exist_ok=True)
+    layout.fit_dir.mkdir(parents=True, exist_ok=True)
     V = model.vertices(fit.shape, fit.pose)
-    write_mesh(paths["ply"], V, model.faces)
+    ply = layout.fit_ply(fit.frame)
+    write_mesh(ply, V, model.faces)
     obj = fit.to_json()
     overlays = {}
     agree = {}
     for k, (cam, obs) in enumerate(zip(cameras, masks, strict=True)):
         sil = silhouette(cam, V, model.faces)
         img = None if images is None else images[k]
-        p = paths["root"] / "overlay" / cam.name / f"{fit.frame:06d}.png"
+        p = layout.fit_overlay(cam.name, fit.frame)
         p.parent.mkdir(parents=True, exist_ok=True)
         write_image(p, overlay_image(img, sil, obs))
-        overlays[cam.name] = str(p.relative_to(paths["root"]))
+        overlays[cam.name] = str(p.relative_to(layout.fit_dir))
         inter = int(np.count_nonzero(sil & obs))
         agree[cam.name] = {
             "precision": inter / max(int(np.count_nonzero(sil)), 1),
@@ -74,6 +68,7 @@ def write_frame_fit(session_path: Path, fit, model, cameras, masks, images=None)
         }
     obj["overlays"] = overlays
     obj["silhouette_agreement"] = agree
-    obj["mesh"] = paths["ply"].name
-    atomic_write_json(paths["json"], obj)
-    return paths
+    obj["mesh"] = ply.name
+    if run is not None:
+        obj["run"] = run
+    return atomic_write_json(layout.fit_json(fit.frame), obj)

@@ -16,7 +16,11 @@ __all__ = ["write_report"]
 
 log = logging.getLogger(__name__)
 
-REPORT_DIR = "report"
+
+
+def _esc(value) -> str:
+    """Text for HTML content or a quoted attribute: every name and number a report embeds goes through here."""
+    return html.escape(str(value), quote=True)
 
 
 def _cost_figure(fits: dict) -> str:
@@ -75,8 +79,8 @@ def _table_html(table: dict) -> str:
         return "<td>–</td><td>–</td>" if value is None else f"<td>{value:.1f} {u}</td><td>{error:+.1f} {u}</td>"
 
     for name, r in table.items():
-        u = r["unit"]
-        row = f"<tr><td>{html.escape(name.replace('_', ' '))}</td><td>{r['mean']:.1f} ± {r['std']:.1f} {u}</td>"
+        u = _esc(r["unit"])
+        row = f"<tr><td>{_esc(name.replace('_', ' '))}</td><td>{r['mean']:.1f} ± {r['std']:.1f} {u}</td>"
         if has_truth:
             row += pair(r["truth"], r["error"], u)
         if has_anny:
@@ -85,65 +89,68 @@ def _table_html(table: dict) -> str:
     return "<table>" + "".join(rows) + "</table>"
 
 
-def write_report(session_path, *, max_overlay_frames: int = 6, extra: dict | None = None) -> Path:
-    """Write ``report/index.html``, ``report/measurements.json`` and ``.csv`` for a fitted session.
+def write_report(source, *, max_overlay_frames: int = 6, extra: dict | None = None) -> Path:
+    """Write ``report/index.html``, ``report/measurements.json`` and ``.csv`` for a fitted session
+    (a :class:`~studio.workspace.Workspace`, a :class:`~studio.workspace.Layout` or a folder).
 
-    ``extra`` {title: text} adds plain-text notes (e.g. what the demo did not do). Raises
-    :class:`~studio.fit.FitError` when the session has no fit results.
+    ``extra`` {title: text} adds plain-text notes (e.g. what the demo did not do). Every name
+    the page embeds is HTML-escaped. Raises :class:`~studio.fit.FitError` when the session has
+    no fit results.
     """
+    from rigs.atomic import atomic_write_text
     from rigs.imageio import read_image
     from studio.body import BodyModel
     from studio.fit import OVERLAY_COLORS, load_fits
     from studio.report.measurements import load_truth, measurement_table, write_measurements
     from studio.report.views import body_views, png_base64
+    from studio.workspace import Layout, Workspace
 
     t0 = time.perf_counter()
-    session_path = Path(session_path)
+    lay = source.layout if isinstance(source, Workspace) else source if isinstance(source, Layout) else Layout(source)
+    session_path = lay.source
     if not session_path.is_dir():
         raise FitError(f"{session_path}: no such session folder")
-    fits = load_fits(session_path)
+    fits = load_fits(lay)
     genders = {f.gender for f in fits.values()}
     gender = sorted(genders)[0]
     model = BodyModel.load(gender)
-    truth = load_truth(session_path)
+    truth = load_truth(lay)
     table = measurement_table(model, fits, truth)
-    out = session_path / REPORT_DIR
-    write_measurements(out, table)
+    write_measurements(lay, table)
     frames = sorted(fits)
     shape = np.mean([fits[f].shape for f in frames], axis=0)
     rest = body_views(model.vertices(shape), model.faces)
     posed = body_views(model.vertices(fits[frames[0]].shape, fits[frames[0]].pose), model.faces, azimuths=(0, 45, 90))
     seq = {}
-    sp = session_path / "fit" / "sequence.json"
-    if sp.is_file():
-        seq = json.loads(sp.read_text())
+    if lay.fit_sequence.is_file():
+        seq = json.loads(lay.fit_sequence.read_text())
     step = max(1, int(np.ceil(len(frames) / max_overlay_frames)))
     overlay_rows = []
+    fdir = lay.fit_dir / "overlay"
+    cameras = sorted(p.name for p in fdir.iterdir() if p.is_dir()) if fdir.is_dir() else []
     for f in frames[::step]:
-        fdir = session_path / "fit" / "overlay"
         imgs = []
-        if fdir.is_dir():
-            for cam_dir in sorted(p for p in fdir.iterdir() if p.is_dir()):
-                p = cam_dir / f"{f:06d}.png"
-                if p.is_file():
-                    im = read_image(p)
-                    imgs.append(f'<img src="{png_base64(im[::2, ::2])}" title="{cam_dir.name}">')
+        for cam in cameras:
+            p = lay.fit_overlay(cam, f)
+            if p.is_file():
+                im = read_image(p)
+                imgs.append(f'<img src="{png_base64(im[::2, ::2])}" title="{_esc(cam)}" alt="{_esc(cam)}">')
         c = fits[f].costs
-        overlay_rows.append(f"<h3>frame {f} — cost {c['total']:.2f}</h3><div class='row'>{''.join(imgs)}</div>")
+        overlay_rows.append(f"<h3>frame {_esc(f)} — cost {c['total']:.2f}</h3><div class='row'>{''.join(imgs)}</div>")
     legend = " ".join(
-        f"<span class='sw' style='background:rgb{tuple(col)}'></span>{html.escape(name)}"
+        f"<span class='sw' style='background:rgb{tuple(int(v) for v in col)}'></span>{_esc(name)}"
         for name, col in OVERLAY_COLORS.items()
     )
     timing = np.mean([fits[f].timings.get("total", np.nan) for f in frames])
-    notes = "".join(f"<h3>{html.escape(k)}</h3><pre>{html.escape(v)}</pre>" for k, v in (extra or {}).items())
-    page = f"""<!doctype html><html><head><meta charset="utf-8"><title>Body fit report — {html.escape(session_path.name)}</title>
+    notes = "".join(f"<h3>{_esc(k)}</h3><pre>{_esc(v)}</pre>" for k, v in (extra or {}).items())
+    page = f"""<!doctype html><html><head><meta charset="utf-8"><title>Body fit report — {_esc(session_path.name)}</title>
 <style>body{{font-family:sans-serif;max-width:1100px;margin:auto;padding:1em}} table{{border-collapse:collapse}}
 td,th{{border:1px solid #ccc;padding:3px 8px;text-align:right}} img{{margin:2px;max-width:100%}}
 .sw{{display:inline-block;width:1em;height:1em;margin:0 4px 0 12px;vertical-align:middle;border:1px solid #888}}
 .row{{display:flex;flex-wrap:wrap}}</style></head><body>
 <h1>Body shape and pose from silhouettes</h1>
-<p>Session <code>{html.escape(str(session_path))}</code>: {len(frames)} fitted frame(s) ({html.escape(str(frames[0]))}…{html.escape(str(frames[-1]))}),
-model <b>{html.escape(gender)}</b>{' (chosen by lower cost: ' + html.escape(json.dumps(seq.get('gender_costs'))) + ')' if seq.get('gender_costs') else ''};
+<p>Session <code>{_esc(str(session_path))}</code>: {len(frames)} fitted frame(s) ({_esc(str(frames[0]))}…{_esc(str(frames[-1]))}),
+model <b>{_esc(gender)}</b>{' (chosen by lower cost: ' + _esc(json.dumps(seq.get('gender_costs'))) + ')' if seq.get('gender_costs') else ''};
 mean fit time {timing:.1f} s per frame. Thesis ch. 4: annealed particle filter on the pose, staged Nelder–Mead on pose and shape,
 silhouette cost eq. 4.6 with coarse-to-fine pyramid levels.</p>
 <h2>Measurements</h2>
@@ -153,17 +160,12 @@ Spread = standard deviation over frames (thesis §4.8.6).{' Truth: the simulated
 <img src="{_measurement_figure(table)}">
 <h2>Cost per frame</h2><img src="{_cost_figure(fits)}">
 <h2>Fitted body</h2><p>Mean shape over frames, rest pose, front / left / back / right:</p><img src="{png_base64(rest)}">
-<p>Frame {frames[0]}, fitted pose:</p><img src="{png_base64(posed)}">
+<p>Frame {_esc(frames[0])}, fitted pose:</p><img src="{png_base64(posed)}">
 <h2>Overlays</h2><p>Legend: {legend}. One image per camera (half resolution).</p>
 {''.join(overlay_rows)}
 {notes}
 <p style="color:#777">Generated {time.strftime('%Y-%m-%d %H:%M:%S')} by <code>studio report</code>.</p>
 </body></html>"""
-    p = out / "index.html"
-    tmp = p.with_name(p.name + ".tmp")
-    tmp.write_text(page, encoding="utf-8")
-    import os
-
-    os.replace(tmp, p)
+    p = atomic_write_text(lay.report_html, page)
     log.info("report written to %s in %.1f s", p, time.perf_counter() - t0)
     return p

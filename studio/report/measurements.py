@@ -60,42 +60,38 @@ def measurement_table(model, fits: dict, truth: dict | None = None) -> dict:
     return out
 
 
-def write_measurements(folder: Path, table: dict) -> tuple[Path, Path]:
-    """``measurements.json`` and ``measurements.csv``.
+def write_measurements(layout, table: dict) -> tuple[Path, Path]:
+    """``report/measurements.json`` and ``report/measurements.csv`` of a session
+    (a :class:`~studio.workspace.Layout` or a session folder).
 
     CSV columns: name, unit, mean, std, truth, error, truth_anny, error_anny, then one
     column per frame (rows of tables without the ``truth_anny`` keys leave them empty).
     """
     import csv
-    import io
-    import os
 
-    from rigs.imageio import atomic_write_json
+    from rigs.atomic import atomic_open, atomic_write_json
+    from studio.workspace import Layout
 
-    folder = Path(folder)
-    folder.mkdir(parents=True, exist_ok=True)
-    jp = atomic_write_json(folder / "measurements.json", {"format": "studio.measurements", "version": 1,
-                                                           "measurements": table})
+    layout = layout if isinstance(layout, Layout) else Layout(layout)
+    layout.report_dir.mkdir(parents=True, exist_ok=True)
+    jp = atomic_write_json(layout.report_measurements_json,
+                           {"format": "studio.measurements", "version": 1, "measurements": table})
     frames = sorted({f for row in table.values() for f in row["per_frame"]}, key=int)
-    buf = io.StringIO()
-    w = csv.writer(buf)
-    w.writerow(["name", "unit", "mean", "std", "truth", "error", "truth_anny", "error_anny"]
-               + [f"frame_{f}" for f in frames])
-    for name, row in table.items():
-        fmt = (lambda v: "" if v is None else f"{v:.2f}")
-        w.writerow([name, row["unit"], fmt(row["mean"]), fmt(row["std"]), fmt(row["truth"]), fmt(row["error"]),
-                    fmt(row.get("truth_anny")), fmt(row.get("error_anny"))]
-                   + [fmt(row["per_frame"].get(f)) for f in frames])
-    cp = folder / "measurements.csv"
-    tmp = cp.with_name(cp.name + ".tmp")
-    with open(tmp, "w", newline="") as fh:
-        fh.write(buf.getvalue())
-        fh.flush()
-        os.fsync(fh.fileno())
-    os.replace(tmp, cp)
-    return Path(jp), cp
+    with atomic_open(layout.report_measurements_csv, "w", newline="") as fh:
+        w = csv.writer(fh)
+        w.writerow(["name", "unit", "mean", "std", "truth", "error", "truth_anny", "error_anny"]
+                   + [f"frame_{f}" for f in frames])
+        for name, row in table.items():
+            fmt = (lambda v: "" if v is None else f"{v:.2f}")
+            w.writerow([name, row["unit"], fmt(row["mean"]), fmt(row["std"]), fmt(row["truth"]), fmt(row["error"]),
+                        fmt(row.get("truth_anny")), fmt(row.get("error_anny"))]
+                       + [fmt(row["per_frame"].get(f)) for f in frames])
+    return jp, layout.report_measurements_csv
 
 
-def load_truth(session_path) -> dict | None:
-    p = Path(session_path) / "truth" / "measurements.json"
+def load_truth(layout) -> dict | None:
+    """The simulator's true measurements of a session (:class:`~studio.workspace.Layout` or folder), or None."""
+    from studio.workspace import Layout
+
+    p = (layout if isinstance(layout, Layout) else Layout(layout)).truth_measurements
     return json.loads(p.read_text()) if p.is_file() else None

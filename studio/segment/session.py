@@ -21,10 +21,8 @@ from __future__ import annotations
 
 import json
 import logging
-import multiprocessing
 import time
 from collections.abc import Callable
-from concurrent.futures import ProcessPoolExecutor
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -38,22 +36,16 @@ from studio.segment.errors import SegmentationError
 from studio.segment.morphology import Morphology
 from studio.segment.skin import SkinClassifier
 from studio.segment.voting import FloorVotes, ShadowVoter
+from studio.workers import worker_pool
 
-__all__ = ["SegmentOptions", "SegmentationSummary", "segment_session", "SEGMENTATION_DIR", "label_path"]
+__all__ = ["SegmentOptions", "SegmentationSummary", "segment_session"]
 
 log = logging.getLogger(__name__)
 
-SEGMENTATION_DIR = "segmentation"
 SUMMARY_FORMAT = "studio.segmentation"
 SUMMARY_VERSION = 1
-RESERVED = {"background", "skin", "skin_models", "overlay", "floor_votes"}
 OVERLAY_COLORS = {PERSON: (40, 90, 255), SHADOW: (230, 30, 30)}
 SKIN_COLOR = (255, 150, 0)
-
-
-def label_path(session_path: Path, camera: str, index: int) -> Path:
-    """Path of the label image of ``camera`` / frame ``index``."""
-    return Path(session_path) / SEGMENTATION_DIR / camera / f"{index:06d}.png"
 
 
 @dataclass(frozen=True)
@@ -83,6 +75,7 @@ class SegmentationSummary:
     seconds: float
     fractions: dict[str, dict[str, float]] = field(default_factory=dict)
     relabelled: dict[str, int] = field(default_factory=dict)
+    skipped: list[int] = field(default_factory=list)  # frames already done with the same settings
 
 
 # ---------------------------------------------------------------------- worker state
@@ -97,10 +90,12 @@ def _init_worker(state: dict) -> None:
 
 def _setup_state(state: dict) -> None:
     from rigs.session import Session
+    from studio.workspace import Layout
 
     _STATE.clear()
     _STATE.update(state)
     _STATE["session"] = Session.open(state["path"])
+    _STATE["layout"] = Layout(state["out"], source=state["path"])
     calib = state.get("calibration")
     _STATE["voter"] = ShadowVoter(calib, state["cameras"]) if calib is not None else None
     grid = state.get("grid")
@@ -135,59 +130,41 @@ def _segment_frame(index: int, state: dict) -> tuple[dict, dict, dict]:
     return frame, labels, relabelled
 
 
+def _fractions(labels) -> list[float]:
+    return (np.bincount(labels.ravel(), minlength=3)[:3] / labels.size).tolist()
+
+
 def _process_frame(index: int) -> dict:
+    """Segment one multi-frame and write its outputs; the label images go last, so a frame whose
+    labels exist for every camera is complete (every file is written atomically)."""
     from rigs.imageio import write_image
 
     state = _STATE
-    root = Path(state["path"]) / SEGMENTATION_DIR
+    lay = state["layout"]
     frame, labels, relabelled = _segment_frame(index, state)
     overlay = state["overlay_every"] > 0 and index % state["overlay_every"] == 0
-    fractions = {}
     for cam in state["cameras"]:
-        lab = labels[cam]
-        write_image(root / cam / f"{index:06d}.png", lab, compression=1)
         skin = None
         model = state["skin"].get(cam)
         if model is not None:
-            skin = model.predict(frame[cam], lab == PERSON)
-            write_image(root / "skin" / cam / f"{index:06d}.png", skin, compression=1)
+            skin = model.predict(frame[cam], labels[cam] == PERSON)
+            write_image(lay.skin(cam, index), skin, compression=1)
         if overlay:
-            write_image(root / "overlay" / cam / f"{index:06d}.png", _overlay(frame[cam], lab, skin))
-        counts = np.bincount(lab.ravel(), minlength=3)[:3] / lab.size
-        fractions[cam] = counts.tolist()
+            write_image(lay.segmentation_overlay(cam, index), _overlay(frame[cam], labels[cam], skin))
     if overlay and state.get("floor_votes") is not None:
         votes = state["floor_votes"](labels)
         scaled = (votes.astype(np.uint16) * 255 // max(len(state["cameras"]), 1)).astype(np.uint8)
-        write_image(root / "floor_votes" / f"{index:06d}.png", scaled)
+        write_image(lay.floor_votes(index), scaled)
+    for cam in state["cameras"]:
+        write_image(lay.labels(cam, index), labels[cam], compression=1)
+    fractions = {cam: _fractions(labels[cam]) for cam in state["cameras"]}
     return {"index": index, "fractions": fractions, "relabelled": relabelled}
 
 
 # ---------------------------------------------------------------------- preparation
-def _load_calibration(session, cameras: list[str]):
-    from calibration import RigCalibration
-
-    if session.calibration_path is None:
-        raise SegmentationError(
-            f"session {session.path}: no calibration.json, needed for multi-view shadow voting "
-            "(calibrate the rig, or segment with --no-voting)"
-        )
-    calib = RigCalibration.load(session.calibration_path)
-    for cam in cameras:
-        if cam not in calib:
-            raise SegmentationError(
-                f"{session.calibration_path}: camera {cam!r} of the session is not calibrated"
-            )
-        size = tuple(session.image_size(cam))
-        if tuple(calib[cam].size) != size:
-            raise SegmentationError(
-                f"{session.calibration_path}: camera {cam!r} is calibrated for "
-                f"{calib[cam].size[0]}x{calib[cam].size[1]} images, the session's are {size[0]}x{size[1]}"
-            )
-    return calib
-
-
-def _background_model(session, cam: str, options: SegmentOptions) -> BackgroundModel:
-    folder = session.path / SEGMENTATION_DIR / "background" / cam
+def _background_model(ws, cam: str, options: SegmentOptions) -> BackgroundModel:
+    session = ws.session
+    folder = ws.layout.background_model_dir(cam)
     model = None
     if (folder / "model.json").is_file() and not options.refit_background:
         model = BackgroundModel.load(folder)
@@ -223,18 +200,17 @@ def _floor_grid(calib, resolution: float):
     return FloorGrid((lo[0] - pad, hi[0] + pad), (lo[1] - pad, hi[1] + pad), resolution)
 
 
-def _skin_models(session, state: dict, frames: list[int], options: SegmentOptions) -> dict:
+def _skin_models(ws, state: dict, frames: list[int], options: SegmentOptions) -> dict:
     cameras = state["cameras"]
     if not options.skin:
         return {}
     if options.skin_model is not None:
         model = SkinClassifier.load(options.skin_model)
         return {cam: model for cam in cameras}
-    folder = session.path / SEGMENTATION_DIR / "skin_models"
     models = {}
     missing = []
     for cam in cameras:
-        path = folder / f"{cam}.npz"
+        path = ws.layout.skin_model(cam)
         if path.is_file() and not options.refit_background:
             models[cam] = SkinClassifier.load(path)
         else:
@@ -256,44 +232,94 @@ def _skin_models(session, state: dict, frames: list[int], options: SegmentOption
         except SegmentationError as exc:
             log.warning("camera %s: no skin model (%s)", cam, exc)
             continue
-        models[cam].save(folder / f"{cam}.npz")
+        ws.layout.skin_model(cam).parent.mkdir(parents=True, exist_ok=True)
+        models[cam].save(ws.layout.skin_model(cam))
     return models
 
 
+def _open(source, out=None):
+    from studio.workspace import Workspace, WorkspaceError
+
+    if isinstance(source, Workspace):
+        return source
+    try:
+        return Workspace.open(source, out=out)
+    except WorkspaceError as exc:
+        raise SegmentationError(str(exc)) from None
+
+
+def _settings(models: dict, options: SegmentOptions, voting: bool, skin_cameras) -> dict:
+    """What decides a frame's outputs: a frame done with other settings is done again."""
+    first = next(iter(models.values()))
+    return {
+        "thresholds": first.thresholds.to_dict(),
+        "morphology": {k: getattr(first.morphology, k) for k in
+                       ("median", "open_radius", "close_radius", "min_area", "max_person_hole", "max_hole")},
+        "voting": voting,
+        "skin_cameras": sorted(skin_cameras),
+        "skin_model": None if options.skin_model is None else str(options.skin_model),
+        "overlay_every": int(options.overlay_every),
+        "floor_resolution": float(options.floor_resolution),
+    }
+
+
+def _done_frames(ws, frames: list[int], settings: dict) -> list[int]:
+    """Frames whose labels exist for every camera, written with the same ``settings``."""
+    try:
+        stored = json.loads(ws.layout.segmentation_summary.read_text()).get("settings")
+    except (OSError, ValueError):
+        return []
+    if stored != settings:
+        return []
+    return [i for i in frames if all(ws.layout.labels(c, i).is_file() for c in ws.camera_names)]
+
+
 def segment_session(
-    path: str | Path,
+    source,
     options: SegmentOptions = SegmentOptions(),
     *,
     frames: list[int] | None = None,
     workers: int = 1,
     progress: Callable[[int, int], None] | None = None,
+    force: bool = False,
+    out: str | Path | None = None,
 ) -> SegmentationSummary:
-    """Segment ``frames`` (default: all complete frames) of the session at ``path``.
+    """Segment ``frames`` (default: all complete frames) of a session.
 
+    ``source`` is a :class:`studio.workspace.Workspace` or a session folder (outputs then go
+    to ``out``, default the session). Frames already segmented with the same settings are
+    skipped (a rerun after an interruption continues where it stopped) unless ``force``.
     ``progress(done, total)`` is called after each frame. Raises :class:`SegmentationError`
     for a camera without background frames, image sizes that disagree with the background
     model or the calibration, and a missing calibration when voting is requested.
     """
-    from rigs.imageio import atomic_write_json
-    from rigs.session import Session
+    from rigs.atomic import atomic_write_json
+    from rigs.imageio import read_image
+    from studio.workspace import SEGMENTATION_RESERVED, WorkspaceError
 
     t0 = time.perf_counter()
-    session = Session.open(path)
-    cameras = list(session.cameras)
-    bad = sorted(RESERVED & set(cameras))
+    ws = _open(source, out)
+    cameras = ws.camera_names
+    bad = sorted(SEGMENTATION_RESERVED & set(cameras))
     if bad:
-        raise SegmentationError(f"session {session.path}: camera names {bad} clash with output folders")
-    frames = list(session.frame_indices if frames is None else frames)
+        raise SegmentationError(f"session {ws.path}: camera names {bad} clash with output folders")
+    frames = list(ws.frame_indices if frames is None else frames)
     if not frames:
-        raise SegmentationError(f"session {session.path}: no complete frames to segment")
-    for index in frames:
-        if index not in session.frame_indices:
-            raise SegmentationError(f"session {session.path}: frame {index} is not a complete frame")
-    models = {cam: _background_model(session, cam, options) for cam in cameras}
+        raise SegmentationError(f"session {ws.path}: no complete frames to segment")
+    try:
+        ws.check_frames(frames)
+        ws.check_writable(ws.layout.segmentation_dir)
+    except WorkspaceError as exc:
+        raise SegmentationError(str(exc)) from None
+    models = {cam: _background_model(ws, cam, options) for cam in cameras}
     voting = options.voting and len(cameras) >= 2
-    calib = _load_calibration(session, cameras) if voting else None
+    try:
+        calib = ws.require_calibration("multi-view shadow voting (or segment with --no-voting)") if voting else None
+    except WorkspaceError as exc:
+        raise SegmentationError(str(exc)) from None
     state = {
-        "path": str(session.path),
+        "path": str(ws.path),
+        "out": str(ws.layout.root),
         "cameras": cameras,
         "models": models,
         "calibration": calib,
@@ -302,62 +328,64 @@ def segment_session(
         "skin": {},
     }
     _setup_state(state)
-    state["skin"] = _skin_models(session, _STATE, frames, options)
+    state["skin"] = _skin_models(ws, _STATE, frames, options)
     _STATE["skin"] = state["skin"]
-
-    root = session.path / SEGMENTATION_DIR
+    settings = _settings(models, options, voting, state["skin"])
+    skipped = [] if force else _done_frames(ws, frames, settings)
+    todo = [i for i in frames if i not in set(skipped)]
+    summary = {
+        "format": SUMMARY_FORMAT,
+        "version": SUMMARY_VERSION,
+        "cameras": cameras,
+        "frames": frames,
+        "labels": {"0": "background", "1": "person", "2": "shadow"},
+        "settings": settings,
+        "thresholds": settings["thresholds"],
+        "voting": voting,
+        "skin_cameras": sorted(state["skin"]),
+        "status": "running",
+    }
+    # the settings go down first: a rerun after a kill knows which finished frames it may keep
+    atomic_write_json(ws.layout.segmentation_summary, summary, fsync=False)
     for cam in cameras:
-        (root / cam).mkdir(parents=True, exist_ok=True)
+        ws.layout.labels(cam, 0).parent.mkdir(parents=True, exist_ok=True)
         if cam in state["skin"]:
-            (root / "skin" / cam).mkdir(parents=True, exist_ok=True)
+            ws.layout.skin(cam, 0).parent.mkdir(parents=True, exist_ok=True)
         if options.overlay_every > 0:
-            (root / "overlay" / cam).mkdir(parents=True, exist_ok=True)
+            ws.layout.segmentation_overlay(cam, 0).parent.mkdir(parents=True, exist_ok=True)
     if options.overlay_every > 0 and state["grid"] is not None:
-        (root / "floor_votes").mkdir(parents=True, exist_ok=True)
+        ws.layout.floor_votes(0).parent.mkdir(parents=True, exist_ok=True)
 
-    results = []
+    results = [{"index": i, "relabelled": {},
+                "fractions": {c: _fractions(read_image(ws.layout.labels(c, i))) for c in cameras}} for i in skipped]
     total = len(frames)
-    if workers <= 1:
-        for i, index in enumerate(frames):
+    if skipped:
+        log.info("%d of %d frame(s) already segmented with the same settings: skipped (--force redoes them)",
+                 len(skipped), total)
+        if progress:
+            progress(len(results), total)
+    if workers <= 1 or len(todo) <= 1:
+        for index in todo:
             results.append(_process_frame(index))
             if progress:
-                progress(i + 1, total)
+                progress(len(results), total)
     else:
-        # "spawn": a forked child inherits OpenCV's thread pool in an unusable state and hangs
-        context = multiprocessing.get_context("spawn")
-        with ProcessPoolExecutor(
-            workers, mp_context=context, initializer=_init_worker, initargs=(state,)
-        ) as pool:
-            for i, result in enumerate(pool.map(_process_frame, frames, chunksize=2)):
+        with worker_pool(workers, _init_worker, (state,)) as pool:
+            for result in pool.map(_process_frame, todo, chunksize=2):
                 results.append(result)
                 if progress:
-                    progress(i + 1, total)
+                    progress(len(results), total)
     seconds = time.perf_counter() - t0
     fractions = {
         cam: dict(zip(("background", "person", "shadow"), np.mean([r["fractions"][cam] for r in results], axis=0).tolist()))
         for cam in cameras
     }
     relabelled = {cam: int(sum(r["relabelled"].get(cam, 0) for r in results)) for cam in cameras}
-    first = next(iter(models.values()))
-    atomic_write_json(
-        session.path / SEGMENTATION_DIR / "segmentation.json",
-        {
-            "format": SUMMARY_FORMAT,
-            "version": SUMMARY_VERSION,
-            "cameras": cameras,
-            "frames": frames,
-            "labels": {"0": "background", "1": "person", "2": "shadow"},
-            "thresholds": first.thresholds.to_dict(),
-            "voting": voting,
-            "skin_cameras": sorted(state["skin"]),
-            "mean_fractions": fractions,
-            "relabelled_by_voting": relabelled,
-            "seconds": round(seconds, 3),
-        },
-        fsync=False,
-    )
+    summary.update(status="complete", skipped=skipped, mean_fractions=fractions, relabelled_by_voting=relabelled,
+                   seconds=round(seconds, 3))
+    atomic_write_json(ws.layout.segmentation_summary, summary, fsync=False)
     return SegmentationSummary(
-        path=session.path,
+        path=ws.layout.root,
         cameras=cameras,
         frames=frames,
         voting=voting,
@@ -365,5 +393,5 @@ def segment_session(
         seconds=seconds,
         fractions=fractions,
         relabelled=relabelled,
+        skipped=skipped,
     )
-

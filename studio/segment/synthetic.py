@@ -182,8 +182,10 @@ def write_session(
 
     from rigs.imageio import write_image
     from rigs.session import SessionWriter
+    from studio.workspace import Layout
 
     path = Path(path)
+    lay = Layout(path)
     scene = SyntheticScene.build(n_cameras, size, torso_color=torso_color, seed=seed)
     calib = scene.calibration
     calib_file = path.parent / f".{path.name}-calibration.json"
@@ -202,8 +204,7 @@ def write_session(
             images, labels, skins = moved.render(seed=seed + index)
             writer.write_frame(index, images)
             for cam in images:
-                for kind, array in (("labels", labels[cam]), ("skin", skins[cam])):
-                    folder = path / "truth" / kind / cam
-                    folder.mkdir(parents=True, exist_ok=True)
-                    write_image(folder / f"{index:06d}.png", array)
+                for target, array in ((lay.truth_labels(cam, index), labels[cam]), (lay.truth_skin(cam, index), skins[cam])):
+                    target.parent.mkdir(parents=True, exist_ok=True)
+                    write_image(target, array)
     return path

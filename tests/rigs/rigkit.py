@@ -9,7 +9,18 @@ import numpy as np
 from rigs import SessionWriter
 
 CAMERAS = ("cam0", "cam1", "cam2", "cam3")
-CALIBRATION = {"format": "studio.rig-calibration", "version": 1, "cameras": {}, "units": "m"}
+
+
+def calibration_dict(cameras=CAMERAS, size=(40, 30)) -> dict:
+    """A valid native calibration of ``cameras`` on a ring, for ``size`` images."""
+    from calibration import Camera, RigCalibration
+    from calibration.formats.native import rig_to_dict
+
+    cams = {}
+    for k, name in enumerate(cameras):
+        a = 2 * np.pi * k / len(cameras)
+        cams[name] = Camera.look_at(name, [3 * np.cos(a), 3 * np.sin(a), 2.0], [0, 0, 1], 40.0, size)
+    return rig_to_dict(RigCalibration(cameras=cams))
 
 
 def source_image(cam_index: int, i: int, size=(40, 30), dtype=np.uint8) -> np.ndarray:
@@ -27,7 +38,7 @@ def make_source(path: Path, n: int = 6, cameras=CAMERAS, size=(40, 30), backgrou
     """A session folder like ``studio simulate`` writes: ``n`` frames, backgrounds, calibration."""
     with SessionWriter.create(path, list(cameras), rig="test-source", fps=fps,
                               pixel_formats=dict.fromkeys(cameras, "RGB8"),
-                              calibration=CALIBRATION, compression=0) as w:  # fmt: skip
+                              calibration=calibration_dict(cameras, size), compression=0) as w:  # fmt: skip
         for c, cam in enumerate(cameras):
             for b in range(backgrounds):
                 w.write_background(cam, b, source_image(c, 1000 + b, size))

@@ -50,7 +50,7 @@ def test_check_fails_on_damage(tmp_path, capsys):
     capsys.readouterr()
     assert main(["session", "info", str(tmp_path / "s"), "--check"]) == 1
     out = capsys.readouterr().out
-    assert "check     1 problem(s) (8 images decoded)" in out
+    assert "check     1 problem(s) (8 images decoded, calibration absent)" in out
     assert "000001.png is corrupt" in out
 
 

@@ -43,7 +43,7 @@ def test_demo_runs_the_pipeline_and_says_what_is_missing(tmp_path, monkeypatch, 
     calls = {}
     monkeypatch.setattr(studio.simulate, "ensure_rendered", lambda spec, seed=0, progress=None: session)
     monkeypatch.setattr(studio.segment, "segment_session",
-                        lambda path, frames=None, workers=1, progress=None: calls.setdefault("segment", frames))
+                        lambda path, frames=None, workers=1, progress=None, force=False: calls.setdefault("segment", frames))
     monkeypatch.setattr(fit_cmd, "QUICK", dict(n_particles=12, n_layers=2, nm_evaluations=4, final_evaluations=4,
                                                partition_particles=8, partition_layers=1, n_shape_free=2))
     spec = tmp_path / "spec.yaml"

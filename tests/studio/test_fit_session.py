@@ -10,7 +10,7 @@ from rigs.imageio import write_image
 from rigs.session import SessionWriter
 from studio.body import BodyModel
 from studio.cli import main
-from studio.fit import FitError, FitOptions, SessionInputs, fit_session, load_fits
+from studio.fit import FitError, FitOptions, fit_session, load_fits, open_workspace
 from studio.render import silhouette
 
 
@@ -59,20 +59,20 @@ TINY = FitOptions(levels=(2, 1, 0), n_particles=16, n_layers=3, n_particles_trac
 def test_missing_segmentation_or_calibration_is_named(tmp_path, capsys):
     make_session(tmp_path / "noseg", segmentation=False, n_frames=1)
     with pytest.raises(FitError, match=r"no segmentation/ folder — run `studio segment"):
-        SessionInputs(tmp_path / "noseg")
+        open_workspace(tmp_path / "noseg")
     assert main(["fit", str(tmp_path / "noseg")]) == 1
     err = capsys.readouterr().err
     assert "studio segment" in err and len(err.strip().splitlines()) == 1
     make_session(tmp_path / "nocal", calibration=False, n_frames=1)
     with pytest.raises(FitError, match="no calibration.json"):
-        SessionInputs(tmp_path / "nocal")
+        open_workspace(tmp_path / "nocal")
     with pytest.raises(FitError, match="no such session folder"):
-        SessionInputs(tmp_path / "absent")
+        open_workspace(tmp_path / "absent")
 
 
 def test_fit_session_checks_frames_and_arguments(tmp_path):
     make_session(tmp_path / "s", n_frames=1)
-    with pytest.raises(FitError, match="frame 5 is not a complete frame"):
+    with pytest.raises(FitError, match=r"frame\(s\) \[5\] are not complete frames"):
         fit_session(tmp_path / "s", frames=[5], gender="female")
     with pytest.raises(FitError, match="gender"):
         fit_session(tmp_path / "s", gender="robot")
@@ -117,3 +117,55 @@ def test_cli_fit_then_report(tmp_path, capsys, monkeypatch):
     csv = (tmp_path / "s" / "report" / "measurements.csv").read_text().splitlines()
     assert csv[0].startswith("name,unit,mean,std,truth,error") and len(csv) == 10
     assert main(["report", str(tmp_path / "absent")]) == 1
+
+
+def test_rerun_keeps_frames_fitted_with_the_same_settings(tmp_path, monkeypatch):
+    import studio.fit.session as fs
+
+    make_session(tmp_path / "s", n_frames=3)
+    first = fit_session(tmp_path / "s", gender="female", options=TINY, seed=0)
+    assert first["kept"] == [] and first["frames"] == [0, 1, 2]
+    (tmp_path / "s" / "fit" / "000002.json").unlink()  # as if killed before frame 2 finished
+    fitted = []
+    real = fs.fit_frame
+
+    def counting(*args, **kwargs):
+        fitted.append(kwargs["frame"])
+        return real(*args, **kwargs)
+
+    monkeypatch.setattr(fs, "fit_frame", counting)
+    again = fit_session(tmp_path / "s", gender="female", options=TINY, seed=0)
+    assert again["kept"] == [0, 1] and sorted(set(fitted)) == [2]
+    assert again["costs"]["0"] == first["costs"]["0"]
+    fitted.clear()
+    other_seed = fit_session(tmp_path / "s", gender="female", options=TINY, seed=1)
+    assert other_seed["kept"] == [] and sorted(set(fitted)) == [1, 2]  # frame 0: the key frame, fitted by gender
+    fitted.clear()
+    forced = fit_session(tmp_path / "s", gender="female", options=TINY, seed=1, force=True)
+    assert forced["kept"] == [] and sorted(set(fitted)) == [1, 2]
+
+
+def test_unwritable_fit_folder_fails_before_any_work(tmp_path, monkeypatch):
+    import studio.fit.session as fs
+
+    make_session(tmp_path / "s", n_frames=1)
+    (tmp_path / "s" / "fit").write_text("not a folder")
+    monkeypatch.setattr(fs, "fit_frame_gender", lambda *a, **k: pytest.fail("fitted before checking the output"))
+    with pytest.raises(FitError, match=r"fit: cannot write results there .*--out DIR"):
+        fit_session(tmp_path / "s", gender="female", options=TINY)
+
+
+def test_report_escapes_hostile_names(tmp_path):
+    from studio.report import write_report
+
+    hostile = tmp_path / "<img src=x onerror=alert(1)>"
+    make_session(hostile, n_frames=1)
+    fit_session(hostile, gender="female", options=TINY)
+    page = write_report(hostile).read_text()
+    assert "<img src=x" not in page and "onerror=alert(1)>" not in page
+    assert "&lt;img src=x onerror=alert(1)&gt;" in page
+    assert page.count("<img ") >= 3  # the report's own pictures are still there
+    rows = (hostile / "report" / "measurements.csv").read_text().splitlines()
+    assert rows[0].startswith("name,unit,mean,std,truth,error") and len(rows) > 5
+    table = json.loads((hostile / "report" / "measurements.json").read_text())["measurements"]
+    assert 1000 < table["stature"]["mean"] < 2200 and table["stature"]["truth"] is None

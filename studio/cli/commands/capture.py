@@ -68,6 +68,19 @@ def _render_spec_sources(desc, seed: int, console):
     return replace(desc, cameras=cams)
 
 
+def _check_calibration(rig) -> None:
+    """The rig's calibration against its cameras (names, image sizes, geometry) before anything is recorded."""
+    from calibration import RigCalibration
+    from studio.cli import CommandError
+    from studio.workspace import WorkspaceError, validate_calibration
+
+    sizes = {n: (int(c.get("Width")), int(c.get("Height"))) for n, c in rig.cameras.items()}
+    try:
+        validate_calibration(RigCalibration.load(rig.calibration_path), sizes, source=rig.calibration_path)
+    except (WorkspaceError, ValueError, OSError) as exc:
+        raise CommandError(f"{exc} (the rig's calibration; fix it or remove 'calibration' from the rig description)") from None
+
+
 def run(args: argparse.Namespace) -> int:
     from rich.console import Console
 
@@ -92,6 +105,8 @@ def run(args: argparse.Namespace) -> int:
 
     with Rig.open(desc) as rig:
         names = rig.camera_names
+        if rig.calibration_path is not None:
+            _check_calibration(rig)
         try:
             writer = SessionWriter.create(
                 args.out, names, rig=rig.name, fps=desc.frame_rate,

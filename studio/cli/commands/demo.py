@@ -42,13 +42,13 @@ def register(subparsers) -> None:
 def run(args) -> int:
     from rich.progress import BarColumn, MofNCompleteColumn, Progress, TimeElapsedColumn
 
-    from studio.cli import CommandError
+    from studio.cli import CommandError, open_workspace
     from studio.cli.commands.fit import QUICK
-    from studio.cli.commands.segment import _parse_frames
     from studio.fit import FitError, FitOptions, fit_session
     from studio.report import write_report
     from studio.segment import segment_session
     from studio.simulate import ensure_rendered
+    from studio.workspace.frames import select_frames
 
     if not args.spec.is_file():
         raise CommandError(f"{args.spec}: sample sequence spec not found")
@@ -61,27 +61,24 @@ def run(args) -> int:
         session = ensure_rendered(args.spec, seed=0,
                                   progress=lambda d, n: bar.update(task, completed=d, total=n))
         bar.update(task, total=1, completed=1)
-    from rigs.session import Session
-
-    frames = _parse_frames(args.frames, Session.open(session).frame_indices)
-    if not frames:
-        raise CommandError(f"--frames {args.frames!r} selects no frame of {session}")
+    ws = open_workspace(session)
+    frames = select_frames(args.frames, ws.frame_indices)
     t_seg = time.perf_counter()
     with Progress(*cols) as bar:
         task = bar.add_task("2/4 segment", total=len(frames))
-        segment_session(session, frames=frames, workers=args.workers,
+        segment_session(ws, frames=frames, workers=args.workers, force=True,
                         progress=lambda d, n: bar.update(task, completed=d, total=n))
     t_fit = time.perf_counter()
     options = FitOptions(**QUICK) if args.quick else FitOptions()
     with Progress(*cols) as bar:
         task = bar.add_task(f"3/4 fit {len(frames)} frames ({args.workers} workers)", total=len(frames))
         try:
-            summary = fit_session(session, frames=frames, gender=args.gender, workers=args.workers,
-                                  options=options, progress=lambda d, n: bar.update(task, completed=d, total=n))
+            summary = fit_session(ws, frames=frames, gender=args.gender, workers=args.workers,
+                                  options=options, force=True, progress=lambda d, n: bar.update(task, completed=d, total=n))
         except FitError as exc:
             raise CommandError(str(exc)) from None
     t_rep = time.perf_counter()
-    report = write_report(session, extra={"What the demo does not do yet": NOT_DONE})
+    report = write_report(ws, extra={"What the demo does not do yet": NOT_DONE})
     t_end = time.perf_counter()
     print(f"4/4 report written in {t_end - t_rep:.1f} s")
     print(f"demo: fitted frames {frames} of {session} with the {summary['gender']} model")

@@ -24,6 +24,11 @@ def register(subparsers) -> None:
     p.add_argument("--workers", type=int, default=1, help="parallel worker processes (default: %(default)s)")
     p.add_argument("--seed", type=int, default=0, help="random seed (default: %(default)s)")
     p.add_argument("--quick", action="store_true", help="fewer particles and evaluations (about 3x faster, coarser)")
+    p.add_argument("--force", action="store_true",
+                   help="fit every selected frame again (default: frames already fitted with the same settings are kept)")  # fmt: skip
+    p.add_argument("--out", type=Path, default=None,
+                   help="write fit/ into this folder instead of the session (e.g. a read-only session; "
+                        "its segmentation/ is read from there too)")  # fmt: skip
     p.set_defaults(func=run)
 
 
@@ -35,30 +40,30 @@ def run(args) -> int:
     from rich.progress import BarColumn, MofNCompleteColumn, Progress, TimeElapsedColumn
 
     from studio.cli import CommandError
-    from studio.cli.commands.segment import _parse_frames
-    from studio.fit import FitError, FitOptions, SessionInputs, fit_session
+    from studio.fit import FitError, FitOptions, fit_session, open_workspace
+    from studio.workspace.frames import select_frames
 
     if args.workers < 1:
         raise CommandError(f"--workers must be >= 1, got {args.workers}")
     try:
-        inputs = SessionInputs(args.session)
+        ws = open_workspace(args.session, out=args.out)
     except FitError as exc:
         raise CommandError(str(exc)) from None
-    frames = _parse_frames(args.frames, inputs.frame_indices)
-    if frames is not None and not frames:
-        raise CommandError(f"--frames {args.frames!r} selects no frame of {args.session}")
+    frames = select_frames(args.frames, ws.frame_indices)
     options = FitOptions(**QUICK) if args.quick else FitOptions()
     with Progress("[progress.description]{task.description}", BarColumn(), MofNCompleteColumn(),
                   TimeElapsedColumn()) as bar:
-        n = len(frames) if frames is not None else len(inputs.frame_indices)
+        n = len(frames) if frames is not None else len(ws.frame_indices)
         task = bar.add_task("fitting", total=n)
         try:
-            summary = fit_session(args.session, frames=frames, gender=args.gender, workers=args.workers,
-                                  options=options, seed=args.seed,
+            summary = fit_session(ws, frames=frames, gender=args.gender, workers=args.workers,
+                                  options=options, seed=args.seed, force=args.force,
                                   progress=lambda done, total: bar.update(task, completed=done))
         except FitError as exc:
             raise CommandError(str(exc)) from None
     costs = list(summary["costs"].values())
+    if summary["kept"]:
+        print(f"{len(summary['kept'])} frame(s) already fitted with the same settings were kept (--force fits them again)")
     print(f"fitted {len(costs)} frame(s) with the {summary['gender']} model in {summary['wall_time']:.1f} s "
-          f"(cost mean {sum(costs) / len(costs):.2f}); results in {Path(args.session) / 'fit'}")
+          f"(cost mean {sum(costs) / len(costs):.2f}); results in {ws.layout.fit_dir}")
     return 0

@@ -17,16 +17,20 @@ def register(subparsers) -> None:
         ),
     )
     p.add_argument("session", type=Path, help="a session fitted with `studio fit`")
+    p.add_argument("--out", type=Path, default=None,
+                   help="the folder `studio fit --out` wrote to (the report goes there too)")
     p.set_defaults(func=run)
 
 
 def run(args) -> int:
-    from studio.cli import CommandError
+    from studio.cli import CommandError, open_workspace
     from studio.fit import FitError
     from studio.report import write_report
 
+    ws = open_workspace(args.session, out=args.out)
+    ws.check_writable(ws.layout.report_dir)
     try:
-        path = write_report(args.session)
+        path = write_report(ws)
     except FitError as exc:
         raise CommandError(str(exc)) from None
     print(f"report: {path}")

@@ -33,27 +33,11 @@ def register(subparsers) -> None:
                    help="write quick-look overlays for every N-th frame (0: none; default 1)")  # fmt: skip
     p.add_argument("--t-hsv", type=float, default=None, help="eq. 5.5 background threshold t^HSV")
     p.add_argument("--t-s", type=float, default=None, help="eq. 5.5 saturation threshold t^S")
+    p.add_argument("--force", action="store_true",
+                   help="segment every selected frame again (default: frames already segmented with the same settings are kept)")  # fmt: skip
+    p.add_argument("--out", type=Path, default=None,
+                   help="write segmentation/ into this folder instead of the session (e.g. a read-only session)")  # fmt: skip
     p.set_defaults(func=run)
-
-
-def _parse_frames(text: str | None, available: list[int]) -> list[int] | None:
-    from studio.cli import CommandError
-
-    if text is None:
-        return None
-    try:
-        if ":" in text:
-            parts = [int(v) if v else None for v in text.split(":")]
-            if len(parts) > 3:
-                raise ValueError(text)
-            start, stop = parts[0], parts[1] if len(parts) > 1 else None
-            step = parts[2] if len(parts) > 2 and parts[2] else 1
-            chosen = [i for i in available if (start is None or i >= start) and (stop is None or i < stop)]
-            first = chosen[0] if chosen else 0
-            return [i for i in chosen if (i - first) % step == 0]
-        return [int(v) for v in text.split(",") if v.strip()]
-    except ValueError:
-        raise CommandError(f"--frames: cannot parse {text!r} (expected START:STOP[:STEP] or 1,2,3)") from None
 
 
 def run(args) -> int:
@@ -61,16 +45,14 @@ def run(args) -> int:
 
     from rich.progress import BarColumn, MofNCompleteColumn, Progress, TimeRemainingColumn
 
-    from rigs.session import Session
-    from studio.cli import CommandError
+    from studio.cli import CommandError, open_workspace
     from studio.segment import SegmentOptions, Thresholds, segment_session
+    from studio.workspace.frames import select_frames
 
     if args.workers < 1:
         raise CommandError(f"--workers must be >= 1, got {args.workers}")
-    session = Session.open(args.session)
-    frames = _parse_frames(args.frames, session.frame_indices)
-    if frames is not None and not frames:
-        raise CommandError(f"--frames {args.frames!r} selects no frame of {args.session}")
+    ws = open_workspace(args.session, out=args.out)
+    frames = select_frames(args.frames, ws.frame_indices)
     thresholds = None
     if args.t_hsv is not None or args.t_s is not None:
         base = Thresholds()
@@ -87,23 +69,26 @@ def run(args) -> int:
         skin_model=args.skin_model,
         overlay_every=max(0, args.overlay_every),
     )
-    total = len(frames) if frames is not None else session.frame_count
+    total = len(frames) if frames is not None else len(ws.frame_indices)
     with Progress(
         "[progress.description]{task.description}", BarColumn(), MofNCompleteColumn(), TimeRemainingColumn()
     ) as bar:
         task = bar.add_task("segmenting", total=total)
         summary = segment_session(
-            args.session,
+            ws,
             options,
             frames=frames,
             workers=args.workers,
+            force=args.force,
             progress=lambda done, n: bar.update(task, completed=done, total=n),
         )
     n = len(summary.frames)
+    if summary.skipped:
+        print(f"{len(summary.skipped)} frame(s) already segmented with the same settings were kept (--force redoes them)")
     print(
         f"segmented {n} frame(s) x {len(summary.cameras)} camera(s) in {summary.seconds:.1f} s "
         f"({n / max(summary.seconds, 1e-9):.1f} multi-frames/s); voting "
         f"{'on' if summary.voting else 'off'}; skin models for {summary.skin_cameras or 'no camera'}"
     )
-    print(f"labels in {summary.path / 'segmentation'}")
+    print(f"labels in {ws.layout.segmentation_dir}")
     return 0

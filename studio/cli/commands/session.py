@@ -75,6 +75,18 @@ def _info(args: argparse.Namespace) -> int:
 
     session = Session.open(args.directory)
     report = _check(session) if args.check else None
+    calibration_problems, calibration_warnings = [], []
+    if args.check and session.calibration_path is not None:
+        from studio.workspace import WorkspaceError, validate_calibration
+
+        try:
+            from calibration import RigCalibration
+
+            calib = RigCalibration.load(session.calibration_path)
+            calibration_warnings = validate_calibration(
+                calib, {c: session.image_size(c) for c in session.cameras}, source=session.calibration_path)
+        except (WorkspaceError, ValueError, OSError) as exc:  # CalibrationError is a ValueError
+            calibration_problems.append(str(exc))
     indices = session.frame_indices
     summary = {
         "path": str(session.path),
@@ -93,7 +105,9 @@ def _info(args: argparse.Namespace) -> int:
     }
     if report is not None:
         summary["check"] = {
-            "ok": report.ok,
+            "ok": report.ok and not calibration_problems,
+            "calibration_problems": calibration_problems,
+            "calibration_warnings": calibration_warnings,
             "images_checked": report.images_checked,
             "problems": list(report.problems),
             "notes": list(report.notes),
@@ -122,12 +136,16 @@ def _info(args: argparse.Namespace) -> int:
             for msg in session.issues:
                 print(f"  {msg}")
         if report is not None:
-            verdict = "OK" if report.ok else f"{len(report.problems)} problem(s)"
-            print(f"check     {verdict} ({report.images_checked} images decoded)")
-            for msg in report.problems[len(session.issues):]:
+            n_problems = len(report.problems) + len(calibration_problems)
+            verdict = "OK" if n_problems == 0 else f"{n_problems} problem(s)"
+            print(f"check     {verdict} ({report.images_checked} images decoded, calibration "
+                  f"{'absent' if session.calibration_path is None else 'invalid' if calibration_problems else 'valid'})")
+            for msg in list(report.problems[len(session.issues):]) + calibration_problems:
                 print(f"  {msg}")
+            for msg in calibration_warnings:
+                print(f"  warning: {msg}")
             for note in report.notes:
                 print(f"  note: {note}")
-    if report is not None and not report.ok:
+    if report is not None and (not report.ok or calibration_problems):
         return 1
     return 0

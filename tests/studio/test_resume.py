@@ -1,0 +1,88 @@
+"""Interrupted ``studio segment`` / ``studio fit``: workers die with the command, nothing torn is
+left under a final name, and a rerun continues where the last one stopped (defect 1)."""
+
+from __future__ import annotations
+
+import json
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from rigs.imageio import read_image
+from studio.segment import SegmentOptions, segment_session
+from studio.segment.synthetic import write_session
+from studio.workspace import Layout
+
+ROOT = Path(__file__).parents[2]
+
+
+def _children(pid: int) -> list[int]:
+    try:
+        return [int(v) for v in Path(f"/proc/{pid}/task/{pid}/children").read_text().split()]
+    except FileNotFoundError:
+        return []
+
+
+def _alive(pid: int) -> bool:
+    try:
+        return Path(f"/proc/{pid}/stat").read_text().split(") ")[1][0] != "Z"
+    except FileNotFoundError:
+        return False
+
+
+@pytest.mark.skipif(not sys.platform.startswith("linux"), reason="reads /proc")
+def test_killed_segment_leaves_no_workers_and_resumes(tmp_path):
+    session = write_session(tmp_path / "s", size=(192, 144), frames=60)
+    lay = Layout(session)
+    cams = ["cam0", "cam1", "cam2"]
+    env = dict(os.environ, PYTHONPATH=str(ROOT) + os.pathsep + os.environ.get("PYTHONPATH", ""))
+    proc = subprocess.Popen([sys.executable, "-m", "studio", "segment", str(session), "--workers", "2",
+                             "--overlay-every", "0"], env=env, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    workers: set[int] = set()
+    t0 = time.monotonic()
+    while time.monotonic() - t0 < 60:
+        workers |= set(_children(proc.pid))
+        if len(workers) >= 2 and (lay.segmentation_dir / "cam2").is_dir() and \
+                len(list((lay.segmentation_dir / "cam2").glob("*.png"))) >= 4:
+            break
+        assert proc.poll() is None, "segment finished before it could be interrupted"
+        time.sleep(0.02)
+    os.kill(proc.pid, signal.SIGKILL)
+    proc.wait(timeout=10)
+    t_kill = time.monotonic()
+    while any(_alive(p) for p in workers) and time.monotonic() - t_kill < 10:
+        time.sleep(0.02)
+    gone = time.monotonic() - t_kill
+    leftover = [p for p in workers if _alive(p)]
+    for p in leftover:
+        os.kill(p, signal.SIGKILL)
+    assert not leftover and gone < 5.0, f"workers {leftover} alive {gone:.1f} s after the parent was killed"
+    # every label under a final name is whole; complete frames are those with all cameras' labels
+    done = [i for i in range(60) if all(lay.labels(c, i).is_file() for c in cams)]
+    assert 0 < len(done) < 60
+    for p in lay.segmentation_dir.glob("cam*/*.png"):
+        assert read_image(p).shape == (144, 192)
+    # the rerun keeps them and does the rest; --force-like rerun redoes everything, same labels
+    summary = segment_session(session, SegmentOptions(overlay_every=0), workers=1)
+    assert summary.skipped == done and summary.frames == list(range(60))
+    resumed = [read_image(lay.labels(c, i)) for c in cams for i in range(0, 60, 7)]
+    again = segment_session(session, SegmentOptions(overlay_every=0), workers=1, force=True)
+    assert again.skipped == []
+    assert all(np.array_equal(a, read_image(lay.labels(c, i)))
+               for a, (c, i) in zip(resumed, [(c, i) for c in cams for i in range(0, 60, 7)], strict=True))
+    meta = json.loads(lay.segmentation_summary.read_text())
+    assert meta["status"] == "complete" and meta["skipped"] == []
+
+
+def test_segment_settings_change_redoes_frames(tmp_path):
+    session = write_session(tmp_path / "s", size=(64, 48), frames=3)
+    first = segment_session(session, SegmentOptions(overlay_every=0, skin=False))
+    assert first.skipped == []
+    assert segment_session(session, SegmentOptions(overlay_every=0, skin=False)).skipped == [0, 1, 2]
+    assert segment_session(session, SegmentOptions(overlay_every=0, skin=False, voting=False)).skipped == []

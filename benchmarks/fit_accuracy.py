@@ -60,8 +60,9 @@ def main(argv=None) -> int:
     from rigs.imageio import read_image
     from studio.body import BodyModel
     from studio.cli.commands.fit import QUICK
-    from studio.cli.commands.segment import _parse_frames
-    from studio.fit import FitOptions, SessionInputs, fit_frame, fit_session, load_fits, observed_masks
+    from studio.fit import FitOptions, fit_frame, fit_session, load_fits
+    from studio.workspace import Workspace
+    from studio.workspace.frames import select_frames
     from studio.fit.evaluate import joint_error, silhouette_agreement, surface_distance, true_mesh
     from studio.render import silhouette
     from studio.report.measurements import load_truth, measurement_table
@@ -80,23 +81,22 @@ def main(argv=None) -> int:
 
     t0 = time.perf_counter()
     session = ensure_rendered(args.spec, seed=0)
-    from rigs.session import Session
-
-    frames = _parse_frames(args.frames, Session.open(session).frame_indices)
-    segment_session(session, frames=frames, workers=args.workers)
+    ws = Workspace.open(session)
+    frames = select_frames(args.frames, ws.frame_indices)
+    segment_session(ws, frames=frames, workers=args.workers, force=True)
     t_fit = time.perf_counter()
-    summary = fit_session(session, frames=frames, gender="female", workers=args.workers, options=options)
+    summary = fit_session(ws, frames=frames, gender="female", workers=args.workers, options=options, force=True)
     t_fit = time.perf_counter() - t_fit
     model = BodyModel.load(summary["gender"])
     fits = load_fits(session)
     fits = {f: fits[f] for f in frames}
-    inputs = SessionInputs(session)
+    cameras = ws.cameras
     rows = []
     for f, fit in fits.items():
         V = model.vertices(fit.shape, fit.pose)
         Vt = true_mesh(session, f)
-        truth_masks = [read_image(session / "truth" / "labels" / c.name / f"{f:06d}.png") == 1 for c in inputs.cameras]
-        model_masks = [silhouette(c, V, model.faces) for c in inputs.cameras]
+        truth_masks = [read_image(ws.layout.truth_labels(c.name, f)) == 1 for c in cameras]
+        model_masks = [silhouette(c, V, model.faces) for c in cameras]
         prec, rec = silhouette_agreement(model_masks, truth_masks)
         rows.append({
             "frame": f,
@@ -113,7 +113,7 @@ def main(argv=None) -> int:
     if not args.no_robustness:
         f = frames[0]
         fit = fits[f]
-        masks = observed_masks(inputs, f)
+        masks = ws.person_masks(f)
         Vt = true_mesh(session, f)
         rng = np.random.default_rng(0)
         for sigma in [float(s) for s in args.noise.split(",")]:
@@ -121,7 +121,7 @@ def main(argv=None) -> int:
             start[6:] += rng.normal(0, sigma, start[6:].shape) if sigma > 0 else 0.0
             start = model.clip_pose(start)
             e0 = 1000 * joint_error(model, model.vertices(fit.shape, start), Vt)[0]
-            refit = fit_frame(model, inputs.cameras, masks, frame=f, shape=fit.shape, previous_pose=start,
+            refit = fit_frame(model, cameras, masks, frame=f, shape=fit.shape, previous_pose=start,
                               options=options, seed=1)
             e1 = 1000 * joint_error(model, model.vertices(refit.shape, refit.pose), Vt)[0]
             robustness.append({"sigma_rad": sigma, "joint_error_before_mm": e0, "joint_error_after_mm": e1,

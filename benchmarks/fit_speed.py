@@ -43,7 +43,8 @@ def main(argv=None) -> int:
     from studio.body import BodyModel
     from studio.cli.commands.fit import QUICK
     from studio.cost import SilhouetteTarget, silhouette_cost
-    from studio.fit import FitOptions, SessionInputs, fit_frame, fit_session, observed_masks
+    from studio.fit import FitOptions, fit_frame, fit_session
+    from studio.workspace import Workspace
     from studio.render import silhouette
     from studio.render.pyramid import level_camera
     from studio.render.spans import silhouettes_contour
@@ -59,11 +60,11 @@ def main(argv=None) -> int:
 
     session = ensure_rendered(args.spec, seed=0)
     n_seq = min(args.sequence, 24)
-    segment_session(session, frames=list(range(max(n_seq, 1))), workers=2)
-    inputs = SessionInputs(session)
+    ws = Workspace.open(session)
+    segment_session(ws, frames=list(range(max(n_seq, 1))), workers=2, force=True)
     model = BodyModel.load("female")
-    masks = observed_masks(inputs, 0)
-    cams = inputs.cameras
+    masks = ws.person_masks(0)
+    cams = ws.cameras
     pose = model.default_pose()
     V = model.vertices(model.mean_shape(), pose)
     res = {"benchmark": "fit_speed", "options": options.to_dict()}
@@ -103,7 +104,7 @@ def main(argv=None) -> int:
                 copy = tmp / "s"
                 shutil.copytree(session, copy, ignore=shutil.ignore_patterns("fit", "report"))
                 t = time.perf_counter()
-                fit_session(copy, frames=list(range(n_seq)), gender="female", workers=workers, options=options)
+                fit_session(copy, frames=list(range(n_seq)), gender="female", workers=workers, options=options, force=True)
                 res[f"sequence{n_seq}_workers{workers}_s"] = time.perf_counter() - t
             finally:
                 shutil.rmtree(tmp, ignore_errors=True)

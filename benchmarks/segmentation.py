@@ -57,6 +57,7 @@ from studio.segment import (  # noqa: E402
     ycrcb_skin,
 )
 from studio.segment.metrics import label_scores  # noqa: E402
+from studio.workspace import Layout  # noqa: E402
 
 
 def _fmt(x: float) -> str:
@@ -93,7 +94,7 @@ def bench_simulated(session_path: Path | None, quick: bool) -> dict:
     models = {c: BackgroundModel.fit(session.backgrounds(c)) for c in cams}
     voter = ShadowVoter(calib, cams)
     frames = session.frame_indices[: (4 if quick else 20)]
-    truth_root = session.path / "truth" / "labels"
+    lay = Layout(session.path)
     before = {c: [] for c in cams}
     labels_only = {c: [] for c in cams}
     after = {c: [] for c in cams}
@@ -108,7 +109,7 @@ def bench_simulated(session_path: Path | None, quick: bool) -> dict:
             before[c].append(labels[c])
             labels_only[c].append(plain[c])
             after[c].append(voted[c])
-            truth[c].append(read_image(truth_root / c / f"{index:06d}.png"))
+            truth[c].append(read_image(lay.truth_labels(c, index)))
     per_camera = {}
     for c in cams:
         per_camera[c] = {"before": label_scores(before[c], truth[c]), "after": label_scores(after[c], truth[c])}
@@ -139,7 +140,7 @@ def bench_simulated(session_path: Path | None, quick: bool) -> dict:
         for c in cams:
             lb.append(analysed[c][0])
             la.append(voted[c])
-            lt.append(read_image(truth_root / c / f"{index:06d}.png"))
+            lt.append(read_image(lay.truth_labels(c, index)))
     permissive = {"thresholds": loose.to_dict(), "before": label_scores(lb, lt), "after": label_scores(la, lt)}
     for stage in ("before", "after"):
         p, s_ = permissive[stage]["person"], permissive[stage]["shadow"]
@@ -149,7 +150,7 @@ def bench_simulated(session_path: Path | None, quick: bool) -> dict:
           "become shadow, voting gives them back — the fig. 5.3 effect)")
     # skin, self-trained per camera from the session's own frames (§6.3.4): first half of the
     # frames to train (person masks from our segmentation, no labels), second half to test
-    skin_truth_root = session.path / "truth" / "skin"
+    skin_truth_root = lay.truth_dir / "skin"
     skin = None
     if skin_truth_root.is_dir():
         half = len(frames) // 2
@@ -160,12 +161,12 @@ def bench_simulated(session_path: Path | None, quick: bool) -> dict:
             model = SkinClassifier().self_train(imgs[:half], persons[:half])
             for im, pm, i in zip(imgs[half:], persons[half:], frames[half:]):
                 preds.append(model.predict(im, pm))
-                truths_s.append(read_image(skin_truth_root / c / f"{i:06d}.png") > 0)
+                truths_s.append(read_image(lay.truth_skin(c, i)) > 0)
         skin = {"self_trained": binary_scores(preds, truths_s),
                 "ycrcb_in_person": binary_scores(
                     [ycrcb_skin(session.image(c, i)) & (after[c][k] == PERSON)
                      for c in cams for k, i in enumerate(frames) if k >= half],
-                    [read_image(skin_truth_root / c / f"{i:06d}.png") > 0
+                    [read_image(lay.truth_skin(c, i)) > 0
                      for c in cams for k, i in enumerate(frames) if k >= half])}  # fmt: skip
         st, yc = skin["self_trained"], skin["ycrcb_in_person"]
         print(f"   skin (self-trained per camera on {half} frames, tested on {len(frames) - half}): "

@@ -180,6 +180,6 @@ def render_report(
 
 def write_report(path: str | Path, **sections) -> Path:
     """Render and write the report atomically; returns the path."""
-    from rigs.imageio import atomic_write_text
+    from rigs.atomic import atomic_write_text
 
     return atomic_write_text(Path(path), render_report(**sections))

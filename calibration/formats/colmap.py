@@ -24,8 +24,6 @@ from __future__ import annotations
 
 import json
 import logging
-import os
-import shutil
 import tempfile
 from os import PathLike
 from pathlib import Path
@@ -34,7 +32,7 @@ import numpy as np
 
 from calibration.camera import Camera
 from calibration.errors import CalibrationError
-from calibration.formats._io import atomic_write_text
+from rigs.atomic import atomic_write_bytes, atomic_write_text
 from calibration.ground import GroundPlane
 
 log = logging.getLogger(__name__)
@@ -180,8 +178,18 @@ def _params(cam: Camera, path: Path) -> tuple[str, list[float]]:
     return "FULL_OPENCV", base + d8.tolist()
 
 
+#: What a calibration is in COLMAP's files; ``points3D`` is the scene's, not ours.
+CALIBRATION_FILES = ("cameras", "images", "rigs", "frames")
+
+
 def write_colmap(rig, path: str | PathLike, binary: bool = False) -> Path:
-    """Write the model into folder ``path`` (created); files replaced one by one atomically."""
+    """Write the model into folder ``path`` (created); files replaced one by one atomically.
+
+    Only the calibration's files (``cameras``, ``images``, ``rigs``, ``frames`` and the sidecar)
+    are replaced, and their other flavour (``.txt``/``.bin``) removed so no stale model stays;
+    a ``points3D`` already in the folder (the user's reconstruction) is kept, an empty one is
+    written only where none of this flavour exists, so COLMAP can read the folder.
+    """
     import pycolmap
 
     path = Path(path)
@@ -200,19 +208,16 @@ def write_colmap(rig, path: str | PathLike, binary: bool = False) -> Path:
             rec.add_image(image)
             rec.register_image(i)
     path.mkdir(parents=True, exist_ok=True)
-    tmp = Path(tempfile.mkdtemp(prefix=".colmap.", dir=path))
-    try:
-        (rec.write_binary if binary else rec.write_text)(str(tmp))
-        for f in sorted(tmp.iterdir()):
-            with open(f, "rb+") as fh:
-                os.fsync(fh.fileno())
-            os.replace(f, path / f.name)
-    finally:
-        shutil.rmtree(tmp, ignore_errors=True)
-    other = (".txt" if binary else ".bin")
-    for stale in ("cameras", "images", "points3D", "rigs", "frames"):
+    ext, other = (".bin", ".txt") if binary else (".txt", ".bin")
+    has_points = (path / ("points3D" + ext)).exists()
+    with tempfile.TemporaryDirectory(prefix=".colmap.", dir=path) as tmp:
+        (rec.write_binary if binary else rec.write_text)(tmp)
+        for f in sorted(Path(tmp).iterdir()):
+            if f.stem in CALIBRATION_FILES or (f.stem == "points3D" and not has_points):
+                atomic_write_bytes(path / f.name, f.read_bytes())
+    for stale in CALIBRATION_FILES:
         if (path / (stale + other)).exists():
-            (path / (stale + other)).unlink()  # never leave a model of the other flavour behind
+            (path / (stale + other)).unlink()  # never leave a calibration of the other flavour behind
     sidecar = {"format": "studio.rig-calibration.colmap-sidecar", "version": 1,
                "ground": rig.ground.to_dict(), "metadata": rig.metadata}
     atomic_write_text(path / SIDECAR, json.dumps(sidecar, indent=2) + "\n")

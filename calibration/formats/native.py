@@ -13,7 +13,7 @@ from pathlib import Path
 
 from calibration.camera import Camera
 from calibration.errors import CalibrationError
-from calibration.formats._io import atomic_write_text
+from rigs.atomic import atomic_write_text
 from calibration.ground import GroundPlane
 
 FORMAT = "studio.rig-calibration"
@@ -104,4 +104,4 @@ def write_native(rig, path: str | PathLike) -> Path:
         raise CalibrationError(
             f"metadata cannot be written as JSON ({exc})", file=path, field="metadata"
         ) from None
-    return atomic_write_text(path, text + "\n")
+    return atomic_write_text(path, text + "\n", mkdir=True)

@@ -39,7 +39,7 @@ import numpy as np
 
 from calibration.camera import Camera, rodrigues_to_matrix
 from calibration.errors import CalibrationError
-from calibration.formats._io import atomic_path
+from rigs.atomic import atomic_path
 from calibration.ground import GroundPlane
 
 log = logging.getLogger(__name__)
@@ -242,7 +242,7 @@ def write_opencv(rig, intri_path, extri_path=None) -> tuple[Path, Path]:
                 "camera names must be plain words to form FileStorage keys like K_<name>",
                 file=intri_p, camera=name, field="name",
             )
-    with atomic_path(intri_p, ".yml") as tmp:
+    with atomic_path(intri_p, mkdir=True) as tmp:
         fs = cv2.FileStorage(str(tmp), cv2.FILE_STORAGE_WRITE)
         _write_names(fs, rig.camera_names)
         for name, cam in rig.cameras.items():
@@ -253,7 +253,7 @@ def write_opencv(rig, intri_path, extri_path=None) -> tuple[Path, Path]:
             fs.write(f"model_{name}", cam.model)
         fs.release()
         _fix_header(tmp)
-    with atomic_path(extri_p, ".yml") as tmp:
+    with atomic_path(extri_p, mkdir=True) as tmp:
         fs = cv2.FileStorage(str(tmp), cv2.FILE_STORAGE_WRITE)
         _write_names(fs, rig.camera_names)
         for name, cam in rig.cameras.items():

@@ -30,7 +30,7 @@ import tomli_w
 
 from calibration.camera import Camera
 from calibration.errors import CalibrationError
-from calibration.formats._io import atomic_write_text
+from rigs.atomic import atomic_write_text
 from calibration.ground import GroundPlane
 
 GROUND_KEY = "studio_ground"
@@ -162,4 +162,4 @@ def write_toml(rig, path: str | PathLike) -> Path:
         raise CalibrationError(
             f"metadata cannot be written as TOML ({exc})", file=path, field="metadata"
         ) from None
-    return atomic_write_text(path, "\n".join(lines))
+    return atomic_write_text(path, "\n".join(lines), mkdir=True)

@@ -2,10 +2,11 @@
 
 from __future__ import annotations
 
-import os
 from pathlib import Path
 
 import numpy as np
+
+from rigs.atomic import atomic_open
 
 __all__ = ["write_mesh", "read_ply"]
 
@@ -27,8 +28,7 @@ def write_mesh(path: str | Path, vertices: np.ndarray, faces: np.ndarray, colors
     suffix = path.suffix.lower()
     if suffix not in (".ply", ".obj"):
         raise ValueError(f"{path}: mesh format must be .ply or .obj")
-    tmp = path.with_name(f".{path.name}.tmp")
-    with open(tmp, "wb") as fh:
+    with atomic_open(path, "wb") as fh:
         if suffix == ".ply":
             header = ["ply", "format binary_little_endian 1.0", f"element vertex {len(v)}",
                       "property float x", "property float y", "property float z"]
@@ -50,9 +50,6 @@ def write_mesh(path: str | Path, vertices: np.ndarray, faces: np.ndarray, colors
             lines = [f"v {x:.6f} {y:.6f} {z:.6f}" for x, y, z in v]
             lines += [f"f {a + 1} {b + 1} {c + 1}" for a, b, c in f]
             fh.write(("\n".join(lines) + "\n").encode())
-        fh.flush()
-        os.fsync(fh.fileno())
-    os.replace(tmp, path)
     return path
 
 

@@ -11,11 +11,12 @@ component; the file went from 18.7 MB to about 9 MB.
 from __future__ import annotations
 
 import io
-import os
 import zipfile
 from pathlib import Path
 
 import numpy as np
+
+from rigs.atomic import atomic_open
 
 __all__ = ["BLOCK", "quantize_blocks", "dequantize_blocks", "save_model_file"]
 
@@ -59,8 +60,7 @@ def save_model_file(path: Path, arrays: dict[str, np.ndarray]) -> None:
         else:
             out[name] = np.asarray(a)
     path = Path(path)
-    tmp = path.with_name(path.name + ".tmp.npz")
-    with open(tmp, "wb") as fh:
+    with atomic_open(path, "wb") as fh:
         with zipfile.ZipFile(fh, "w", compression=zipfile.ZIP_LZMA) as zf:
             for name, a in out.items():
                 buf = io.BytesIO()
@@ -68,6 +68,3 @@ def save_model_file(path: Path, arrays: dict[str, np.ndarray]) -> None:
                 info = zipfile.ZipInfo(name + ".npy", date_time=(1980, 1, 1, 0, 0, 0))
                 info.compress_type = zipfile.ZIP_LZMA
                 zf.writestr(info, buf.getvalue())
-        fh.flush()
-        os.fsync(fh.fileno())
-    os.replace(tmp, path)

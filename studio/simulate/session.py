@@ -34,10 +34,12 @@ from pathlib import Path
 
 import numpy as np
 
+from rigs.atomic import atomic_write_bytes
 from studio.render import vertex_normals
 from studio.simulate.scene import Scene
 from studio.simulate.sensor import apply_sensor
 from studio.simulate.spec import SimSpec, load_spec
+from studio.workspace.layout import Layout
 
 __all__ = ["simulate", "ensure_rendered", "default_cache_dir", "studio_truth", "TRUTH_VERSION"]
 
@@ -48,21 +50,23 @@ START_NS = 1_700_000_000_000_000_000  # nominal clock of simulated sessions
 
 
 def _atomic_json(path: Path, obj) -> None:
-    from rigs.imageio import atomic_write_json
+    from rigs.atomic import atomic_write_json
 
     atomic_write_json(path, obj)
 
 
 def _save_npz(path: Path, **arrays) -> None:
-    tmp = path.with_name(f".{path.stem}.tmp.npz")
-    np.savez_compressed(tmp, **arrays)
-    os.replace(tmp, path)
+    from rigs.atomic import atomic_open
+
+    with atomic_open(path, "wb") as f:
+        np.savez_compressed(f, **arrays)
 
 
 def _save_npy(path: Path, array: np.ndarray) -> None:
-    tmp = path.with_name(f".{path.stem}.tmp.npy")
-    np.save(tmp, array)
-    os.replace(tmp, path)
+    from rigs.atomic import atomic_open
+
+    with atomic_open(path, "wb") as f:
+        np.save(f, array)
 
 
 def _frame_rng(seed: int, kind: int, frame: int, cam: int) -> np.random.Generator:
@@ -89,6 +93,7 @@ def simulate(
     scene = Scene(spec, seed)
     seed = scene.seed
     out = Path(out)
+    lay = Layout(out)
     cams = scene.cameras
     names = [c.name for c in cams]
     sensor = spec["sensor"]
@@ -105,8 +110,7 @@ def simulate(
             calibration=calib_path, metadata=metadata, overwrite=overwrite)
         truth = writer.truth_dir
         truth.mkdir(parents=True, exist_ok=True)
-        shutil.copyfile(calib_path, truth / ".calibration.json.tmp")
-        os.replace(truth / ".calibration.json.tmp", truth / "calibration.json")
+        atomic_write_bytes(Layout(out).truth_calibration, Path(calib_path).read_bytes())
     try:
         for sub in ("labels", "skin"):
             for n in names:
@@ -126,9 +130,8 @@ def simulate(
             for k, cam in enumerate(cams):
                 r = scene.render(frame, cam, V, normals)
                 images[cam.name] = apply_sensor(r.radiance, sensor, _frame_rng(seed, 3, index, k))
-                write_image(truth / "labels" / cam.name / f"{index:06d}.png", r.labels)
-                write_image(truth / "skin" / cam.name / f"{index:06d}.png",
-                            (r.skin * np.uint8(255)).astype(np.uint8))
+                write_image(lay.truth_labels(cam.name, index), r.labels)
+                write_image(lay.truth_skin(cam.name, index), (r.skin * np.uint8(255)).astype(np.uint8))
             _write_body(scene, truth, index, frame)
             t_ns = START_NS + round(index * 1e9 / fps)
             writer.write_frame(index, images, timestamps_ns={n: t_ns for n in names},
@@ -208,7 +211,7 @@ def _write_body(scene: Scene, truth: Path, index: int, frame: int) -> None:
             arrays[key] = body.extra[key][frame]
     if "pose_bones" in body.extra:
         arrays["pose_bones"] = body.extra["pose_bones"]
-    _save_npz(truth / "bodies" / f"{index:06d}.npz", **arrays)
+    _save_npz(Layout(truth.parent).truth_body(index), **arrays)
 
 
 def default_cache_dir(spec: SimSpec) -> Path:

@@ -19,6 +19,7 @@ def contact_sheet(session: str | Path, index: int = 0, scale: float = 0.5) -> np
     """
     from rigs.imageio import read_image
     from rigs.session import Session
+    from studio.workspace import Layout
 
     s = Session.open(session)
     if s.truth_dir is None:
@@ -27,8 +28,8 @@ def contact_sheet(session: str | Path, index: int = 0, scale: float = 0.5) -> np
     top, bottom = [], []
     for cam in cams:
         img = s.image(cam, index)
-        lab = read_image(s.truth_dir / "labels" / cam / f"{index:06d}.png")
-        skin = read_image(s.truth_dir / "skin" / cam / f"{index:06d}.png") > 0
+        lab = read_image(Layout(s.path).truth_labels(cam, index))
+        skin = read_image(Layout(s.path).truth_skin(cam, index)) > 0
         m = np.zeros_like(img)
         for k in (0, 1, 2):
             m[lab == k] = LABEL_COLOURS[k]

@@ -35,10 +35,11 @@ from __future__ import annotations
 import json
 import logging
 import math
-import os
 from pathlib import Path
 
 import numpy as np
+
+from rigs.atomic import atomic_open
 
 __all__ = ["SEQUENCES", "build_truth", "straight_t_pose", "PART_NAMES", "QUANT_SCALE"]
 
@@ -381,22 +382,21 @@ def build_truth(out_dir: str | Path, names: list[str] | None = None, progress=No
         folder = Path(out_dir) / name
         folder.mkdir(parents=True, exist_ok=True)
         path = folder / "body.npz"
-        tmp = folder / ".body.npz.tmp.npz"
-        np.savez_compressed(
-            tmp, vertices_q=q.astype(np.int16), scale=np.float64(QUANT_SCALE), faces=F,
-            parts=parts, part_names=np.array(PART_NAMES), pose_bones=np.array(pose_bones),
-            bone_rotvecs=rotvecs, root_translation=root.astype(np.float32),
-            yaw=yaw.astype(np.float32), pose_names=np.array(pose_names),
-            phenotype_names=np.array(list(phen)),
-            phenotype_values=np.array(list(phen.values()), dtype=np.float64),
-            bob=np.asarray(bobs, dtype=np.float32),
-            measurements=np.array(json.dumps(meas)),
-            rest_height=((rest[:, 2] - rest[:, 2].min()) / meas["stature"]).astype(np.float16),
-            rest_q=canon[0].astype(np.int16), tpose_q=canon[1].astype(np.int16),
-            source=np.array(f"anny {anny.__version__} topology anny-noeyes-notongue, pose "
-                            "parameterisation local-ref (world-aligned deltas)"),
-        )
-        os.replace(tmp, path)
+        with atomic_open(path, "wb") as tmp:
+            np.savez_compressed(
+                tmp, vertices_q=q.astype(np.int16), scale=np.float64(QUANT_SCALE), faces=F,
+                parts=parts, part_names=np.array(PART_NAMES), pose_bones=np.array(pose_bones),
+                bone_rotvecs=rotvecs, root_translation=root.astype(np.float32),
+                yaw=yaw.astype(np.float32), pose_names=np.array(pose_names),
+                phenotype_names=np.array(list(phen)),
+                phenotype_values=np.array(list(phen.values()), dtype=np.float64),
+                bob=np.asarray(bobs, dtype=np.float32),
+                measurements=np.array(json.dumps(meas)),
+                rest_height=((rest[:, 2] - rest[:, 2].min()) / meas["stature"]).astype(np.float16),
+                rest_q=canon[0].astype(np.int16), tpose_q=canon[1].astype(np.int16),
+                source=np.array(f"anny {anny.__version__} topology anny-noeyes-notongue, pose "
+                                "parameterisation local-ref (world-aligned deltas)"),
+                )
         log.info("wrote %s (%d frames, %.1f kB)", path, n, path.stat().st_size / 1e3)
         written.append(path)
         if progress is not None:

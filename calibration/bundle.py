@@ -40,37 +40,17 @@ import numpy as np
 from scipy.optimize import least_squares
 from scipy.sparse import coo_matrix
 
-from calibration.camera import Camera, distort_fisheye, distort_normalized, matrix_to_rodrigues
+from calibration.camera import Camera
+from calibration.distortion import distort_fisheye, distort_normalized
+from calibration.rotation import matrix_to_rotvec, rotvec_to_matrix
 from calibration.detect import Detection
 from calibration.errors import CalibrationError
 
-__all__ = ["BundleParameterization", "BundleResult", "bundle_adjust", "rodrigues_batch", "pose_residuals"]
+__all__ = ["BundleParameterization", "BundleResult", "bundle_adjust", "pose_residuals"]
 
 log = logging.getLogger(__name__)
 
 N_INTR = 9  # fx fy cx cy k1 k2 p1 p2 k3
-
-
-def rodrigues_batch(rvecs: np.ndarray) -> np.ndarray:
-    """Rotation matrices (N, 3, 3) of axis-angle vectors (N, 3) (vectorised ``cv2.Rodrigues``)."""
-    r = np.asarray(rvecs, float).reshape(-1, 3)
-    theta = np.linalg.norm(r, axis=1)
-    small = theta < 1e-12
-    k = r / np.where(small, 1.0, theta)[:, None]
-    K = np.zeros((len(r), 3, 3))
-    K[:, 0, 1], K[:, 0, 2], K[:, 1, 0] = -k[:, 2], k[:, 1], k[:, 2]
-    K[:, 1, 2], K[:, 2, 0], K[:, 2, 1] = -k[:, 0], -k[:, 1], k[:, 0]
-    s = np.sin(theta)[:, None, None]
-    c = (1 - np.cos(theta))[:, None, None]
-    R = np.eye(3)[None] + s * K + c * (K @ K)
-    # first order for tiny angles
-    if small.any():
-        rs = r[small]
-        Ks = np.zeros((len(rs), 3, 3))
-        Ks[:, 0, 1], Ks[:, 0, 2], Ks[:, 1, 0] = -rs[:, 2], rs[:, 1], rs[:, 2]
-        Ks[:, 1, 2], Ks[:, 2, 0], Ks[:, 2, 1] = -rs[:, 0], -rs[:, 1], rs[:, 0]
-        R[small] = np.eye(3)[None] + Ks
-    return R
 
 
 @dataclass(frozen=True)
@@ -158,7 +138,7 @@ class BundleParameterization:
             t = cam.t - R @ t0
             sl = self.cam_pose_slice(i)
             if sl is not None:
-                x[sl] = np.concatenate([matrix_to_rodrigues(R), t])
+                x[sl] = np.concatenate([matrix_to_rotvec(R), t])
             isl = self.intr_slice(i)
             if isl is not None:
                 d = np.zeros(5)
@@ -168,7 +148,7 @@ class BundleParameterization:
             Rb, tb = board_poses[v]
             Rr = R0 @ Rb
             tr = R0 @ tb + t0
-            x[self.view_slice(j)] = np.concatenate([matrix_to_rodrigues(Rr), tr])
+            x[self.view_slice(j)] = np.concatenate([matrix_to_rotvec(Rr), tr])
         return x
 
     def arrays(self, x: np.ndarray):
@@ -180,7 +160,7 @@ class BundleParameterization:
             p = x[: self.n_cam_pose].reshape(-1, 6)
             cam_r[self.posed] = p[:, :3]
             cam_t[self.posed] = p[:, 3:]
-        Rc = rodrigues_batch(cam_r)
+        Rc = rotvec_to_matrix(cam_r)
         if self.free_intrinsics:
             intr = x[self.n_cam_pose : self.n_cam_pose + self.n_intr].reshape(C, N_INTR)
             kk = intr[:, :4]
@@ -189,7 +169,7 @@ class BundleParameterization:
             kk = np.array([[c.K[0, 0], c.K[1, 1], c.K[0, 2], c.K[1, 2]] for c in self.templates.values()])
             dists = [c.dist for c in self.templates.values()]
         v = x[self.n_cam_pose + self.n_intr :].reshape(-1, 6)
-        Rv = rodrigues_batch(v[:, :3])
+        Rv = rotvec_to_matrix(v[:, :3])
         return Rc, cam_t, kk, dists, Rv, v[:, 3:]
 
     def unpack(self, x: np.ndarray) -> tuple[dict[str, Camera], dict[str, tuple[np.ndarray, np.ndarray]]]:

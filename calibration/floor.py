@@ -18,7 +18,8 @@ from dataclasses import dataclass, field
 import numpy as np
 from scipy.optimize import least_squares
 
-from calibration.camera import Camera, matrix_to_rodrigues, rodrigues_to_matrix
+from calibration.camera import Camera
+from calibration.rotation import matrix_to_rotvec, rotvec_to_matrix
 from calibration.detect import Detection
 from calibration.errors import CalibrationError
 from calibration.extrinsics import solve_board_pose
@@ -49,15 +50,15 @@ def fit_floor_board(
     t0 = cb.R.T @ (tcb - cb.t)
 
     def residual(p):
-        R = rodrigues_to_matrix(p[:3])
+        R = rotvec_to_matrix(p[:3])
         out = []
         for c, d in seen.items():
             X = d.object_points @ R.T + p[3:]
             out.append((cameras[c].project(X) - d.image_points).ravel())
         return np.concatenate(out)
 
-    sol = least_squares(residual, np.concatenate([matrix_to_rodrigues(R0), t0]), loss=loss, f_scale=1.0)
-    R, t = rodrigues_to_matrix(sol.x[:3]), sol.x[3:]
+    sol = least_squares(residual, np.concatenate([matrix_to_rotvec(R0), t0]), loss=loss, f_scale=1.0)
+    R, t = rotvec_to_matrix(sol.x[:3]), sol.x[3:]
     rms = {}
     for c, d in seen.items():
         e = cameras[c].project(d.object_points @ R.T + t) - d.image_points

@@ -20,6 +20,7 @@ from scipy.spatial.transform import Rotation
 
 __all__ = [
     "is_rotation",
+    "look_at",
     "matrix_to_quaternion",
     "matrix_to_rotvec",
     "quaternion_to_matrix",
@@ -33,7 +34,7 @@ def rotvec_to_matrix(rotvec) -> np.ndarray:
     r = np.asarray(rotvec, dtype=np.float64)
     if r.shape[-1:] != (3,):
         raise ValueError(f"rotvec_to_matrix: expected axis-angle vectors of shape (..., 3), got {r.shape}")
-    flat = r.reshape(-1, 3)
+    flat = np.array(r.reshape(-1, 3))  # a writeable copy: SciPy's Cython refuses read-only buffers
     return Rotation.from_rotvec(flat).as_matrix().reshape(r.shape[:-1] + (3, 3))
 
 
@@ -45,7 +46,7 @@ def matrix_to_rotvec(R) -> np.ndarray:
     m = np.asarray(R, dtype=np.float64)
     if m.shape[-2:] != (3, 3):
         raise ValueError(f"matrix_to_rotvec: expected matrices of shape (..., 3, 3), got {m.shape}")
-    flat = m.reshape(-1, 3, 3)
+    flat = np.array(m.reshape(-1, 3, 3))
     return Rotation.from_matrix(flat).as_rotvec().reshape(m.shape[:-2] + (3,))
 
 
@@ -61,14 +62,14 @@ def quaternion_to_matrix(q, *, scalar_first: bool = True) -> np.ndarray:
     if not np.all(np.isfinite(norm)) or np.any(norm < 1e-12):
         raise ValueError(f"quaternion_to_matrix: a quaternion of zero or non-finite norm is not a rotation: "
                          f"{flat[(~np.isfinite(norm)) | (norm < 1e-12)][0].tolist()}")
-    xyzw = np.roll(flat, -1, axis=1) if scalar_first else flat
+    xyzw = np.roll(flat, -1, axis=1) if scalar_first else np.array(flat)
     return Rotation.from_quat(xyzw).as_matrix().reshape(q.shape[:-1] + (3, 3))
 
 
 def matrix_to_quaternion(R, *, scalar_first: bool = True) -> np.ndarray:
     """Unit quaternions ``(..., 4)`` (``w ≥ 0``; ``w x y z`` by default) of rotation matrices."""
     m = np.asarray(R, dtype=np.float64)
-    q = Rotation.from_matrix(m.reshape(-1, 3, 3)).as_quat(canonical=True)
+    q = Rotation.from_matrix(np.array(m.reshape(-1, 3, 3))).as_quat(canonical=True)
     if scalar_first:
         q = np.roll(q, 1, axis=1)
     return q.reshape(m.shape[:-2] + (4,))
@@ -77,7 +78,7 @@ def matrix_to_quaternion(R, *, scalar_first: bool = True) -> np.ndarray:
 def rotation_angle(R) -> np.ndarray:
     """Angle in radians ``(...)`` of rotation matrices ``(..., 3, 3)`` (e.g. ``R_a @ R_b.T``)."""
     m = np.asarray(R, dtype=np.float64)
-    return Rotation.from_matrix(m.reshape(-1, 3, 3)).magnitude().reshape(m.shape[:-2])
+    return Rotation.from_matrix(np.array(m.reshape(-1, 3, 3))).magnitude().reshape(m.shape[:-2])
 
 
 def is_rotation(R, tol: float = 1e-6) -> bool:
@@ -86,3 +87,25 @@ def is_rotation(R, tol: float = 1e-6) -> bool:
     if m.shape != (3, 3) or not np.all(np.isfinite(m)):
         return False
     return bool(np.max(np.abs(m @ m.T - np.eye(3))) <= tol and np.linalg.det(m) > 0)
+
+
+def look_at(center, target, up=(0.0, 0.0, 1.0)) -> tuple[np.ndarray, np.ndarray]:
+    """``(R_cam_from_world (3, 3), t (3,))`` of a camera at ``center`` looking at ``target``.
+
+    OpenCV axes: z forward, x right (perpendicular to ``up``), y down, so ``up`` points up
+    in the image. Raises ``ValueError`` when the view direction is parallel to ``up``.
+
+    >>> R, t = look_at([0.0, -3.0, 1.0], [0.0, 0.0, 1.0])
+    >>> np.round(R @ [0.0, 0.0, 1.0] + t, 9) + 0.0  # the target, 3 m straight ahead
+    array([0., 0., 3.])
+    """
+    c = np.asarray(center, dtype=np.float64)
+    z = np.asarray(target, dtype=np.float64) - c
+    z /= np.linalg.norm(z)
+    x = np.cross(z, np.asarray(up, dtype=np.float64))
+    if np.linalg.norm(x) < 1e-9:
+        raise ValueError(f"look_at: the view direction {z.tolist()} is parallel to up {list(up)}; "
+                         "give a target off that axis or another up vector")
+    x /= np.linalg.norm(x)
+    R = np.stack([x, np.cross(z, x), z])
+    return R, -R @ c

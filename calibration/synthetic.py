@@ -25,7 +25,6 @@ from calibration.detect import Detection
 
 __all__ = [
     "SyntheticScene",
-    "look_at",
     "camera_ring",
     "random_board_poses",
     "floor_board_pose",
@@ -42,21 +41,6 @@ def default_board() -> Board:
     return Board("synthetic_8x6", "checkerboard", 8, 6, 0.08)
 
 
-def look_at(center, target, up=(0.0, 0.0, 1.0)) -> tuple[np.ndarray, np.ndarray]:
-    """``(R_cam_from_world (3, 3), t (3,))`` of a camera at ``center`` looking at ``target``.
-
-    OpenCV axes: z forward, x right, y down (image rows grow downward).
-    """
-    c = np.asarray(center, float)
-    z = np.asarray(target, float) - c
-    z /= np.linalg.norm(z)
-    x = np.cross(z, np.asarray(up, float))
-    x /= np.linalg.norm(x)
-    y = np.cross(z, x)
-    R = np.stack([x, y, z])
-    return R, -R @ c
-
-
 def camera_ring(
     n: int = 6,
     *,
@@ -68,30 +52,37 @@ def camera_ring(
     dist=(-0.12, 0.05, 0.0005, -0.0003, 0.0),
     rng: np.random.Generator | None = None,
     jitter: float = 0.0,
+    start: float = 0.0,
+    names=None,
+    principal_offset: tuple[float, float] = (5.0, -3.0),
 ) -> dict[str, Camera]:
-    """``n`` cameras evenly on a circle of ``radius`` at ``height``, all looking at ``target``.
+    """The toolkit's one camera ring: ``n`` cameras evenly on a circle of ``radius`` at
+    ``height`` from azimuth ``start`` (radians), all looking at ``target``.
 
-    ``jitter`` (metres) perturbs the positions and (×0.05 rad per metre) the intrinsics seed.
+    Camera ``i`` is named ``names[i]`` (default ``cam00``, ``cam01``, ...), its principal point
+    shifted by ``i × principal_offset`` pixels from the image centre (so no two are alike;
+    ``(0, 0)``: centred). ``jitter`` (metres) perturbs the positions and (×0.05 rad per metre)
+    the intrinsics seed.
     """
     rng = np.random.default_rng(0) if rng is None else rng
     cams = {}
     w, h = size
+    du, dv = principal_offset
     for i in range(n):
-        a = 2 * np.pi * i / n
+        a = start + 2 * np.pi * i / n
         c = np.array([radius * np.cos(a), radius * np.sin(a), height]) + rng.normal(0, jitter, 3)
-        R, t = look_at(c, target)
         f = focal * (1 + 0.02 * rng.standard_normal()) if jitter else focal
-        K = np.array([[f, 0, (w - 1) / 2 + 5 * i], [0, f, (h - 1) / 2 - 3 * i], [0, 0, 1.0]])
-        name = f"cam{i:02d}"
-        cams[name] = Camera(name, K, np.array(dist, float), R, t, size)
+        K = np.array([[f, 0, (w - 1) / 2 + du * i], [0, f, (h - 1) / 2 + dv * i], [0, 0, 1.0]])
+        name = f"cam{i:02d}" if names is None else names[i]
+        cams[name] = Camera.look_at(name, c, target, K, size, np.array(dist, float))
     return cams
 
 
 def _rot(axis, angle) -> np.ndarray:
-    from calibration.camera import rodrigues_to_matrix
+    from calibration.rotation import rotvec_to_matrix
 
     a = np.asarray(axis, float)
-    return rodrigues_to_matrix(a / np.linalg.norm(a) * angle)
+    return rotvec_to_matrix(a / np.linalg.norm(a) * angle)
 
 
 def random_board_poses(

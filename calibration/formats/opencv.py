@@ -37,7 +37,8 @@ from pathlib import Path
 
 import numpy as np
 
-from calibration.camera import Camera, rodrigues_to_matrix
+from calibration.camera import Camera
+from calibration.rotation import rotvec_to_matrix
 from calibration.errors import CalibrationError
 from rigs.atomic import atomic_path
 from calibration.ground import GroundPlane
@@ -170,9 +171,9 @@ def read_opencv(intri_path, extri_path=None):
                     file=extri_p, camera=name, field=f"R_{name}",
                 )
             if Rot is None:
-                Rot = rodrigues_to_matrix(rvec.reshape(3))
+                Rot = rotvec_to_matrix(rvec.reshape(3))
             elif rvec is not None and Rot.shape == (3, 3) and np.all(np.isfinite(rvec)):
-                gap = np.max(np.abs(rodrigues_to_matrix(rvec.reshape(3)) - Rot))
+                gap = np.max(np.abs(rotvec_to_matrix(rvec.reshape(3)) - Rot))
                 if gap > ROT_AGREE_TOL:
                     raise CalibrationError(
                         f"disagrees with R_{name} (max difference {gap:.3g})",

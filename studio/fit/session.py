@@ -27,7 +27,6 @@ import json
 import logging
 import time
 from collections.abc import Callable
-from pathlib import Path
 
 import numpy as np
 

@@ -32,20 +32,13 @@ class Box:
 
 def ring_calibration(n_cameras: int, size: tuple[int, int], radius: float = 3.2, height: float = 2.0):
     """``RigCalibration`` of ``n_cameras`` on a ring, looking at (-0.3, -0.2, 0.6), floor z = 0."""
-    from calibration.camera import Camera
     from calibration.ground import GroundPlane
     from calibration.rig import RigCalibration
+    from calibration.synthetic import camera_ring
 
-    w, h = size
-    f = 1.1 * w
-    K = np.array([[f, 0.0, (w - 1) / 2], [0.0, f, (h - 1) / 2], [0.0, 0.0, 1.0]])
-    target = np.array([-0.3, -0.2, 0.6])
-    cams = {}
-    for i in range(n_cameras):
-        a = 2 * np.pi * i / n_cameras + 0.3
-        c = np.array([radius * np.cos(a), radius * np.sin(a), height])
-        name = f"cam{i}"
-        cams[name] = Camera.look_at(name, c, target, K, (w, h), np.zeros(5))
+    cams = camera_ring(n_cameras, radius=radius, height=height, target=(-0.3, -0.2, 0.6), size=size,
+                       focal=1.1 * size[0], dist=np.zeros(5), start=0.3,
+                       names=[f"cam{i}" for i in range(n_cameras)], principal_offset=(0.0, 0.0))
     return RigCalibration(cams, GroundPlane.floor())
 
 

@@ -2,13 +2,13 @@
 
 import cv2
 import numpy as np
+
+from calibration.rotation import matrix_to_rotvec, rotvec_to_matrix
 import pytest
 
 from calibration import CalibrationError, Camera
 from calibration.camera import (
     distort_normalized,
-    matrix_to_rodrigues,
-    rodrigues_to_matrix,
     undistort_normalized,
 )
 
@@ -26,7 +26,7 @@ DISTS = {
 
 
 def make_camera(n=5, name="cam0"):
-    R = rodrigues_to_matrix([0.3, -0.5, 0.2])
+    R = rotvec_to_matrix([0.3, -0.5, 0.2])
     return Camera(name, K, DISTS[n], R, np.array([0.1, -0.2, 3.5]), (640, 480))
 
 
@@ -139,9 +139,9 @@ def test_rodrigues_round_trip_matches_cv2():
     rng = np.random.default_rng(3)
     for r in [np.zeros(3), [np.pi, 0, 0], [0, np.pi - 1e-9, 0], *rng.normal(0, 1.5, (20, 3))]:
         r = np.asarray(r, float)
-        R = rodrigues_to_matrix(r)
+        R = rotvec_to_matrix(r)
         np.testing.assert_allclose(R, cv2.Rodrigues(r)[0], atol=1e-12)
-        np.testing.assert_allclose(rodrigues_to_matrix(matrix_to_rodrigues(R)), R, atol=1e-12)
+        np.testing.assert_allclose(rotvec_to_matrix(matrix_to_rotvec(R)), R, atol=1e-12)
 
 
 def test_replace_and_allclose():

@@ -12,6 +12,8 @@ import json
 
 import cv2
 import numpy as np
+
+from calibration.rotation import rotvec_to_matrix
 import pytest
 
 from calibration import CalibrationError, Camera, FloorGrid, GroundPlane, RigCalibration, floor_view
@@ -20,13 +22,13 @@ from calibration.camera import (
     distort_fisheye,
     fisheye_fold_angle,
     fisheye_theta,
-    rodrigues_to_matrix,
     undistort_fisheye,
 )
 from calibration.detect import Detection
 from calibration.extrinsics import calibrate_extrinsics, initial_rig, solve_board_pose
 from calibration.intrinsics import calibrate_intrinsics
-from calibration.synthetic import camera_ring, default_board, look_at, observe, random_board_poses
+from calibration.rotation import look_at
+from calibration.synthetic import camera_ring, default_board, observe, random_board_poses
 
 #: Two realistic lenses (a GoPro-like and a stronger negative one) and the pure equidistant.
 LENSES = {
@@ -39,7 +41,7 @@ TIGHT = (cv2.TERM_CRITERIA_COUNT + cv2.TERM_CRITERIA_EPS, 100, 1e-15)
 
 def fisheye_camera(dist=LENSES["positive"], skew=0.0, name="fe") -> Camera:
     K = np.array([[420.0, skew, 645.3], [0.0, 418.5, 481.2], [0.0, 0.0, 1.0]])
-    R = rodrigues_to_matrix([0.1, -0.2, 0.05])
+    R = rotvec_to_matrix([0.1, -0.2, 0.05])
     return Camera(name, K, np.array(dist), R, np.array([0.1, 0.2, 0.3]), (1280, 960), "fisheye")
 
 
@@ -249,7 +251,7 @@ def mixed_rig() -> RigCalibration:
     for i, (name, model, n) in enumerate([("pin8", "pinhole", 8), ("fish", "fisheye", 4), ("pin5", "pinhole", 5),
                                          ("fish2", "fisheye", 4)]):
         K = np.array([[600.0 + 11.3 * i, 0.0, 641.7 - i], [0.0, 598.25 + i, 481.3 + 2 * i], [0.0, 0.0, 1.0]])
-        cams[name] = Camera(name, K, rng.normal(0.0, 0.02, n), rodrigues_to_matrix(rng.normal(0, 1.2, 3)),
+        cams[name] = Camera(name, K, rng.normal(0.0, 0.02, n), rotvec_to_matrix(rng.normal(0, 1.2, 3)),
                             rng.normal(0, 2.0, 3), (1280 + 16 * i, 960 - 8 * i), model)
     ground = GroundPlane.from_point_normal([0.0, 0.0, 0.021], [0.03, 0.01, 1.0])
     return RigCalibration(cams, ground, {"lab": "b", "n": 2})
@@ -395,7 +397,7 @@ def test_fisheye_intrinsics_to_camera_end_to_end(tmp_path):
     poses = {}
     for k in range(40):  # boards held in front of this one camera, tilted, across the field
         c = truth.center + truth.R[2] * rng.uniform(0.5, 1.1) + truth.R.T @ np.r_[rng.uniform(-0.6, 0.6, 2), 0]
-        R_wb = truth.R.T @ rodrigues_to_matrix(rng.uniform(-0.6, 0.6, 3))
+        R_wb = truth.R.T @ rotvec_to_matrix(rng.uniform(-0.6, 0.6, 3))
         poses[f"v{k:02d}"] = (R_wb, c - R_wb @ np.r_[board.extent[0] / 2, board.extent[1] / 2, 0.0])
     obs = observe(cams, board, poses, rng, noise_px=0.1, max_view_angle_deg=80)[truth.name]
     assert len(obs) >= 10

@@ -13,7 +13,7 @@ import numpy as np
 import pytest
 
 from calibration import CalibrationError, Camera, GroundPlane, RigCalibration
-from calibration.camera import rodrigues_to_matrix
+from calibration.rotation import rotvec_to_matrix
 from calibration.formats import detect_format, read, write
 
 POSE2SIM = "calibration/pose2sim_demo_4cam"
@@ -26,7 +26,7 @@ def make_rig(n_dist=8) -> RigCalibration:
     for i, name in enumerate(["cam_a", "02", "side-left"]):
         K = np.array([[900.0 + 13.7 * i, 0.0, 317.3 + i], [0.0, 905.25 - i, 243.9 - 2 * i], [0.0, 0.0, 1.0]])
         dist = rng.normal(0.0, 0.02, n_dist)
-        R = rodrigues_to_matrix(rng.normal(0.0, 1.2, 3))
+        R = rotvec_to_matrix(rng.normal(0.0, 1.2, 3))
         t = rng.normal(0.0, 2.0, 3)
         cams[name] = Camera(name, K, dist, R, t, (640 + 16 * i, 480 - 8 * i))
     ground = GroundPlane.from_point_normal([0.0, 0.0, 0.037], [0.02, -0.05, 1.0])
@@ -343,7 +343,7 @@ def test_opencv_rotation_disagreement(tmp_path):
     """Rot_<cam> and R_<cam> both present but describing different rotations."""
     intri, extri = _ocv_files(tmp_path)
     rig = make_rig(5)
-    bad_R = rig["02"].replace(R=rodrigues_to_matrix([0.1, 0.2, 0.3]))
+    bad_R = rig["02"].replace(R=rotvec_to_matrix([0.1, 0.2, 0.3]))
     rig.replace(cameras={**rig.cameras, "02": bad_R}).to_opencv(tmp_path / "other")
     # splice the other file's R_02 (rvec) into ours: Rot_02 and R_02 now disagree
     other = (tmp_path / "other" / "extri.yml").read_text()

@@ -53,3 +53,13 @@ def test_is_rotation():
     assert not is_rotation(np.diag([1.0, 1.0, -1.0]))
     assert not is_rotation(R * 1.001)
     assert not is_rotation(np.full((3, 3), np.nan))
+
+
+def test_read_only_inputs_are_accepted():
+    """Camera arrays are frozen (read-only); SciPy's Cython needs a writeable copy."""
+    rv = np.array([0.1, 0.2, 0.3])
+    rv.flags.writeable = False
+    R = rotvec_to_matrix(rv)
+    R.flags.writeable = False
+    assert np.allclose(matrix_to_rotvec(R), rv)
+    assert rotation_angle(R) == pytest.approx(np.linalg.norm(rv))

@@ -10,8 +10,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from calibration.bundle import BundleParameterization, Observations, bundle_adjust, pose_residuals, rodrigues_batch
-from calibration.camera import rodrigues_to_matrix
+from calibration.bundle import BundleParameterization, Observations, bundle_adjust, pose_residuals
+from calibration.rotation import rotvec_to_matrix
 from calibration.detect import Detection
 from calibration.errors import CalibrationError
 from calibration.extrinsics import (
@@ -23,7 +23,8 @@ from calibration.extrinsics import (
     view_graph,
 )
 from calibration.floor import calibrate_floor, floor_check, transform_cameras
-from calibration.synthetic import floor_board_pose, look_at, make_scene
+from calibration.rotation import look_at
+from calibration.synthetic import floor_board_pose, make_scene
 
 
 def rot_deg(A, B):
@@ -45,14 +46,14 @@ def test_synthetic_ring_never_sees_board_all_at_once(ring):
     assert all(len(v) >= 8 for v in ring.observations.values())
 
 
-def test_look_at_and_rodrigues_batch():
+def test_look_at_and_rotvec_to_matrix():
     R, t = look_at([3.0, 0.0, 1.0], [0.0, 0.0, 1.0])
     assert np.allclose(R @ np.array([0.0, 0.0, 1.0]) , [0, -1, 0])  # world up is image up (-y)
     assert np.allclose(R[2], [-1, 0, 0]) and np.allclose(-R.T @ t, [3, 0, 1])
     r = np.array([[0.1, -0.2, 0.3], [0.0, 0.0, 0.0], [1e-14, 0, 0], [2.0, 1.0, -1.0]])
-    assert np.allclose(rodrigues_batch(r), [rodrigues_to_matrix(v) for v in r], atol=1e-12)
-    Rs = np.array([rodrigues_to_matrix([0, 0, a]) for a in (0.1, 0.2, 0.3)])
-    assert rot_deg(rotation_mean(Rs), rodrigues_to_matrix([0, 0, 0.2])) < 1e-6
+    assert np.allclose(rotvec_to_matrix(r), [rotvec_to_matrix(v) for v in r], atol=1e-12)
+    Rs = np.array([rotvec_to_matrix([0, 0, a]) for a in (0.1, 0.2, 0.3)])
+    assert rot_deg(rotation_mean(Rs), rotvec_to_matrix([0, 0, 0.2])) < 1e-6
 
 
 def test_ring_extrinsics_and_floor_recover_truth(ring):
@@ -178,7 +179,7 @@ def test_floor_errors_and_thickness(ring):
 
 
 def test_transform_cameras_round_trip(ring):
-    R = rodrigues_to_matrix([0.1, 0.2, -0.3])
+    R = rotvec_to_matrix([0.1, 0.2, -0.3])
     t = np.array([0.5, -1.0, 0.2])
     moved = transform_cameras(ring.cameras, R, t)
     back = transform_cameras(moved, R.T, -R.T @ t)

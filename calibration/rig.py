@@ -116,21 +116,28 @@ class RigCalibration:
             f"RigCalibration({len(self)} cameras: {', '.join(self.cameras)}; ground={self.ground!r})"
         )
 
-    # ------------------------------------------------------------------ native JSON
+    # ------------------------------------------------------------------ files (calibration.formats)
+    @classmethod
+    def _read(cls, fmt: str, *args) -> RigCalibration:
+        from calibration import formats
+
+        cameras, ground, metadata = formats.reader(fmt)(*args)
+        try:
+            return cls(cameras, ground, metadata)
+        except CalibrationError as exc:
+            raise exc.in_file(args[0]) from None
+
     @classmethod
     def load(cls, path: str | PathLike) -> RigCalibration:
         """Read the native ``calibration.json`` (``format studio.rig-calibration``, version 1)."""
-        from calibration.formats.native import read_native
-
-        return read_native(path)
+        return cls._read("native", path)
 
     def save(self, path: str | PathLike) -> Path:
         """Write the native JSON atomically; returns the path."""
-        from calibration.formats.native import write_native
+        from calibration import formats
 
-        return write_native(self, path)
+        return formats.writer("native")(self, path)
 
-    # ------------------------------------------------------------------ OpenCV YAML
     @classmethod
     def from_opencv(
         cls, intri_path: str | PathLike, extri_path: str | PathLike | None = None
@@ -139,59 +146,57 @@ class RigCalibration:
 
         ``intri_path`` may also be the folder holding both files.
         """
-        from calibration.formats.opencv import read_opencv
-
-        return read_opencv(intri_path, extri_path)
+        return cls._read("opencv", intri_path, extri_path)
 
     def to_opencv(
         self, intri_path: str | PathLike, extri_path: str | PathLike | None = None
     ) -> tuple[Path, Path]:
         """Write EasyMocap-style ``intri.yml`` + ``extri.yml`` (or both into a folder)."""
-        from calibration.formats.opencv import write_opencv
+        from calibration import formats
 
-        return write_opencv(self, intri_path, extri_path)
+        return formats.writer("opencv")(self, intri_path, extri_path)
 
-    # ------------------------------------------------------------------ TOML
     @classmethod
     def from_toml(cls, path: str | PathLike) -> RigCalibration:
         """Read a Pose2Sim / anipose ``Calib.toml``."""
-        from calibration.formats.toml_calib import read_toml
-
-        return read_toml(path)
+        return cls._read("toml", path)
 
     def to_toml(self, path: str | PathLike) -> Path:
         """Write a Pose2Sim / anipose ``Calib.toml``."""
-        from calibration.formats.toml_calib import write_toml
+        from calibration import formats
 
-        return write_toml(self, path)
+        return formats.writer("toml")(self, path)
 
-    # ------------------------------------------------------------------ COLMAP
     @classmethod
     def from_colmap(cls, path: str | PathLike) -> RigCalibration:
         """Read a COLMAP model folder (cameras + images, text or binary) via pycolmap."""
-        from calibration.formats.colmap import read_colmap
-
-        return read_colmap(path)
+        return cls._read("colmap", path)
 
     def to_colmap(self, path: str | PathLike, binary: bool = False) -> Path:
         """Write a COLMAP model folder (OPENCV / FULL_OPENCV / OPENCV_FISHEYE cameras, one
-        image per camera)."""
-        from calibration.formats.colmap import write_colmap
+        image per camera); a ``points3D`` already there is kept."""
+        from calibration import formats
 
-        return write_colmap(self, path, binary=binary)
+        return formats.writer("colmap")(self, path, binary=binary)
 
-    # ------------------------------------------------------------------ Qualisys
     @classmethod
     def from_qualisys(cls, path: str | PathLike) -> RigCalibration:
         """Read a Qualisys QTM calibration export (``*.qca.txt``, XML)."""
-        from calibration.formats.qualisys import read_qualisys
+        return cls._read("qualisys", path)
 
-        return read_qualisys(path)
-
-    # ------------------------------------------------------------------ any
     @classmethod
-    def load_any(cls, path: str | PathLike) -> RigCalibration:
-        """Read a calibration in any supported format, chosen from the path and content."""
-        from calibration.formats import detect_format, read
+    def load_any(cls, path: str | PathLike, fmt: str | None = None) -> RigCalibration:
+        """Read a calibration in any supported format (``fmt``, or chosen from the path and content)."""
+        from calibration import formats
 
-        return read(path, detect_format(path))
+        cameras, ground, metadata = formats.read(path, fmt)
+        try:
+            return cls(cameras, ground, metadata)
+        except CalibrationError as exc:
+            raise exc.in_file(path) from None
+
+    def write(self, path: str | PathLike, fmt: str | None = None) -> Path:
+        """Write in any writable format (``fmt``, or chosen from the path)."""
+        from calibration import formats
+
+        return formats.write(self, path, fmt)

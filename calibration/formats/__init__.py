@@ -13,15 +13,56 @@ qualisys   Qualisys QTM ``*.qca.txt`` (read only)
 
 from __future__ import annotations
 
+import importlib
 from os import PathLike
 from pathlib import Path
+from typing import Any, Callable, NamedTuple
 
 from calibration.errors import CalibrationError
 
-__all__ = ["FORMATS", "WRITABLE", "detect_format", "read", "write"]
+__all__ = ["FORMATS", "RigParts", "WRITABLE", "detect_format", "read", "reader", "write", "writer"]
 
-FORMATS = ("native", "opencv", "toml", "colmap", "qualisys")
-WRITABLE = ("native", "opencv", "toml", "colmap")
+
+class RigParts(NamedTuple):
+    """What a format reader returns; :class:`calibration.RigCalibration` is built from it
+    (format modules never import the rig class: the registry below is the one way in)."""
+
+    cameras: dict
+    ground: Any
+    metadata: dict
+
+
+#: The registry: format name → (module, reader, writer or None). Modules load on first use,
+#: so e.g. pycolmap is imported only for COLMAP files.
+_REGISTRY = {
+    "native": ("native", "read_native", "write_native"),
+    "opencv": ("opencv", "read_opencv", "write_opencv"),
+    "toml": ("toml_calib", "read_toml", "write_toml"),
+    "colmap": ("colmap", "read_colmap", "write_colmap"),
+    "qualisys": ("qualisys", "read_qualisys", None),
+}
+FORMATS = tuple(_REGISTRY)
+WRITABLE = tuple(name for name, (_, _, w) in _REGISTRY.items() if w is not None)
+
+
+def _function(fmt: str, which: int) -> Callable:
+    if fmt not in _REGISTRY:
+        raise CalibrationError(f"unknown format {fmt!r} (known: {', '.join(FORMATS)})")
+    module, *names = _REGISTRY[fmt]
+    name = names[which]
+    if name is None:
+        raise CalibrationError(f"cannot write format {fmt!r} (writable: {', '.join(WRITABLE)})")
+    return getattr(importlib.import_module(f"{__name__}.{module}"), name)
+
+
+def reader(fmt: str) -> Callable[..., RigParts]:
+    """The reader function of ``fmt`` (returns :class:`RigParts`)."""
+    return _function(fmt, 0)
+
+
+def writer(fmt: str) -> Callable:
+    """The writer function of ``fmt`` (``write(rig, path, ...)``)."""
+    return _function(fmt, 1)
 
 
 def _looks_qualisys(path: Path) -> bool:
@@ -74,47 +115,34 @@ def detect_format(path: str | PathLike, for_writing: bool = False) -> str:
     )
 
 
-def read(path: str | PathLike, fmt: str | None = None):
-    """Read ``path`` as ``fmt`` (detected when None) → :class:`RigCalibration`."""
-    from calibration.rig import RigCalibration
-
+def read(path: str | PathLike, fmt: str | None = None) -> RigParts:
+    """Read ``path`` as ``fmt`` (detected when None) → :class:`RigParts`
+    (:meth:`calibration.RigCalibration.load_any` makes the rig of them)."""
     path = Path(path)
     fmt = fmt or detect_format(path)
     if not path.exists():
         raise CalibrationError("no such file or folder", file=path)
-    if fmt == "native":
-        return RigCalibration.load(path)
-    if fmt == "toml":
-        return RigCalibration.from_toml(path)
-    if fmt == "qualisys":
-        return RigCalibration.from_qualisys(path)
-    if fmt == "opencv":
-        if path.is_dir():
-            return RigCalibration.from_opencv(path)
+    if fmt == "opencv" and not path.is_dir():
         if path.name.lower().startswith("extri"):
-            return RigCalibration.from_opencv(path.with_name(path.name.replace("extri", "intri")), path)
-        return RigCalibration.from_opencv(path, path.with_name(path.name.replace("intri", "extri")))
-    if fmt == "colmap":
-        return RigCalibration.from_colmap(path if path.is_dir() else path.parent)
-    raise CalibrationError(f"unknown format {fmt!r} (known: {', '.join(FORMATS)})", file=path)
+            return reader(fmt)(path.with_name(path.name.replace("extri", "intri")), path)
+        return reader(fmt)(path, path.with_name(path.name.replace("intri", "extri")))
+    if fmt == "colmap" and not path.is_dir():
+        path = path.parent
+    return reader(fmt)(path)
 
 
 def write(rig, path: str | PathLike, fmt: str | None = None) -> Path:
     """Write ``rig`` to ``path`` as ``fmt`` (from the name when None); returns the path."""
     path = Path(path)
     fmt = fmt or detect_format(path, for_writing=True)
-    if fmt == "native":
-        return rig.save(path)
-    if fmt == "toml":
-        return rig.to_toml(path)
+    try:
+        write_fn = writer(fmt)
+    except CalibrationError as exc:
+        raise exc.in_file(path) from None
     if fmt == "opencv":
         if path.suffix.lower() in (".yml", ".yaml"):
-            rig.to_opencv(path, path.with_name(path.name.replace("intri", "extri")))
-            return path
-        rig.to_opencv(path)
+            write_fn(rig, path, path.with_name(path.name.replace("intri", "extri")))
+        else:
+            write_fn(rig, path)
         return path
-    if fmt == "colmap":
-        return rig.to_colmap(path)
-    raise CalibrationError(
-        f"cannot write format {fmt!r} (writable: {', '.join(WRITABLE)})", file=path
-    )
+    return write_fn(rig, path)

@@ -32,6 +32,7 @@ import numpy as np
 
 from calibration.camera import Camera
 from calibration.errors import CalibrationError
+from calibration.formats import RigParts
 from rigs.atomic import atomic_write_bytes, atomic_write_text
 from calibration.ground import GroundPlane
 
@@ -103,8 +104,6 @@ def _intrinsics(cam, name: str, path: Path) -> tuple[np.ndarray, np.ndarray, str
 def read_colmap(path: str | PathLike):
     import pycolmap
 
-    from calibration.rig import RigCalibration
-
     path = Path(path)
     if path.is_file():
         path = path.parent
@@ -151,7 +150,7 @@ def read_colmap(path: str | PathLike):
                 raise CalibrationError(f"bad sidecar ({exc!r})", file=sidecar, field="ground") from None
             except CalibrationError as exc:
                 raise exc.in_file(sidecar) from None
-        return RigCalibration(cameras, ground, meta)
+        return RigParts(cameras, ground, meta)
     except CalibrationError as exc:
         raise exc.in_file(path) from None
 

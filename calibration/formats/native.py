@@ -13,6 +13,7 @@ from pathlib import Path
 
 from calibration.camera import Camera
 from calibration.errors import CalibrationError
+from calibration.formats import RigParts
 from rigs.atomic import atomic_write_text
 from calibration.ground import GroundPlane
 
@@ -47,8 +48,6 @@ def rig_to_dict(rig) -> dict:
 
 def rig_from_dict(doc: dict, path: str | PathLike = "<dict>"):
     """Parse the JSON document; errors name ``path``, the camera and the field."""
-    from calibration.rig import RigCalibration
-
     if not isinstance(doc, dict):
         raise CalibrationError("expected a JSON object at the top level", file=path)
     if doc.get("format") != FORMAT:
@@ -79,7 +78,7 @@ def rig_from_dict(doc: dict, path: str | PathLike = "<dict>"):
             if not isinstance(g, dict) or "normal" not in g or "offset" not in g:
                 raise CalibrationError("expected {normal, offset}", field="ground")
             ground = GroundPlane(g["normal"], g["offset"])
-        return RigCalibration(cameras, ground, doc.get("metadata") or {})
+        return RigParts(cameras, ground, doc.get("metadata") or {})
     except CalibrationError as exc:
         raise exc.in_file(path) from None
 

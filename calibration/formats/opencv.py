@@ -40,6 +40,7 @@ import numpy as np
 from calibration.camera import Camera
 from calibration.rotation import rotvec_to_matrix
 from calibration.errors import CalibrationError
+from calibration.formats import RigParts
 from rigs.atomic import atomic_path
 from calibration.ground import GroundPlane
 
@@ -124,8 +125,6 @@ def _model(fs, name: str, path: Path) -> str:
 
 
 def read_opencv(intri_path, extri_path=None):
-    from calibration.rig import RigCalibration
-
     intri_p, extri_p = _paths(intri_path, extri_path)
     fi, fe = _open(intri_p), _open(extri_p)
     try:
@@ -210,7 +209,7 @@ def read_opencv(intri_path, extri_path=None):
                 ", ".join(guessed),
             )
             meta["size_guessed"] = guessed
-        return RigCalibration(cameras, ground, meta)
+        return RigParts(cameras, ground, meta)
     finally:
         fi.release()
         fe.release()

@@ -25,6 +25,7 @@ import numpy as np
 
 from calibration.camera import Camera
 from calibration.errors import CalibrationError
+from calibration.formats import RigParts
 from calibration.ground import GroundPlane
 
 FLIP = np.diag([1.0, -1.0, -1.0])
@@ -82,8 +83,6 @@ def _camera(elem) -> Camera:
 
 
 def read_qualisys(path: str | PathLike):
-    from calibration.rig import RigCalibration
-
     path = Path(path)
     try:
         root = ET.parse(path).getroot()
@@ -106,4 +105,4 @@ def read_qualisys(path: str | PathLike):
     except CalibrationError as exc:
         raise exc.in_file(path) from None
     meta = {"source": "qualisys", "avg_residual": residuals}
-    return RigCalibration(cameras, GroundPlane.floor(), meta)
+    return RigParts(cameras, GroundPlane.floor(), meta)

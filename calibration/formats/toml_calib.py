@@ -30,6 +30,7 @@ import tomli_w
 
 from calibration.camera import Camera
 from calibration.errors import CalibrationError
+from calibration.formats import RigParts
 from rigs.atomic import atomic_write_text
 from calibration.ground import GroundPlane
 
@@ -76,8 +77,6 @@ def _size(item: dict, name: str) -> tuple:
 
 
 def read_toml(path: str | PathLike):
-    from calibration.rig import RigCalibration
-
     path = Path(path)
     try:
         with open(path, "rb") as f:
@@ -105,7 +104,7 @@ def read_toml(path: str | PathLike):
             raise CalibrationError("expected {normal, offset}", field=f"metadata.{GROUND_KEY}")
         else:
             ground = GroundPlane(g["normal"], g["offset"])
-        return RigCalibration(cameras, ground, meta)
+        return RigParts(cameras, ground, meta)
     except CalibrationError as exc:
         raise exc.in_file(path) from None
 

@@ -14,7 +14,7 @@ import pytest
 
 from calibration import CalibrationError, Camera, GroundPlane, RigCalibration
 from calibration.rotation import rotvec_to_matrix
-from calibration.formats import detect_format, read, write
+from calibration.formats import detect_format, write
 
 POSE2SIM = "calibration/pose2sim_demo_4cam"
 POSE2SIM_TOML = "Calib_scene.pose2sim_output_at_1bcde0685195.toml"
@@ -135,11 +135,11 @@ def test_generic_read_write_dispatch(tmp_path):
     for target, fmt in [("x.json", "native"), ("x.toml", "toml"), ("intri.yml", "opencv")]:
         write(rig, tmp_path / target)
         assert detect_format(tmp_path / target) == fmt
-        assert_same(rig, read(tmp_path / target))
+        assert_same(rig, RigCalibration.load_any(tmp_path / target))
     write(rig, tmp_path / "col", "colmap")
     assert detect_format(tmp_path / "col") == "colmap"
     assert detect_format(tmp_path / "col" / "cameras.txt") == "colmap"
-    assert_same(rig, read(tmp_path / "col" / "cameras.txt"))
+    assert_same(rig, RigCalibration.load_any(tmp_path / "col" / "cameras.txt"))
     with pytest.raises(CalibrationError, match="cannot tell the calibration format"):
         detect_format(tmp_path / "x.xyz")
     (tmp_path / "empty").mkdir()
@@ -148,9 +148,9 @@ def test_generic_read_write_dispatch(tmp_path):
     with pytest.raises(CalibrationError, match="say which format"):
         detect_format(tmp_path / "empty", for_writing=True)
     with pytest.raises(CalibrationError, match="no such file"):
-        read(tmp_path / "missing.json")
+        RigCalibration.load_any(tmp_path / "missing.json")
     with pytest.raises(CalibrationError, match="unknown format 'bogus'"):
-        read(tmp_path / "x.json", "bogus")
+        RigCalibration.load_any(tmp_path / "x.json", "bogus")
     with pytest.raises(CalibrationError, match="cannot write format 'qualisys'"):
         write(rig, tmp_path / "y.qca.txt", "qualisys")
 

@@ -63,13 +63,13 @@ def _existing_outputs(path, fmt: str):
 def run(args: argparse.Namespace) -> int:
     from pathlib import Path
 
-    from calibration.formats import read, write
+    from calibration import RigCalibration
     from studio.cli import CommandError
 
     src, dst = Path(args.input), Path(args.output)
     if not src.exists():
         raise CommandError(f"{src}: no such file or folder")
-    rig = read(src, args.from_)
+    rig = RigCalibration.load_any(src, args.from_)
     fmt = _output_format(dst, args.to)
     existing = _existing_outputs(dst, fmt)
     if existing and not args.force:
@@ -77,6 +77,6 @@ def run(args: argparse.Namespace) -> int:
     if fmt == "colmap":
         rig.to_colmap(dst, binary=args.binary)
     else:
-        write(rig, dst, fmt)
+        rig.write(dst, fmt)
     print(f"wrote {len(rig)} cameras ({', '.join(rig.camera_names)}) as {fmt} to {dst}")
     return 0

@@ -50,12 +50,17 @@ log = logging.getLogger(__name__)
 
 #: Lens models a :class:`Camera` knows: OpenCV radial-tangential and ``cv2.fisheye``.
 MODELS = ("pinhole", "fisheye")
+#: Smallest focal length accepted (a 1e-300 px focal length is a unit or parse error).
+MIN_FOCAL = 1e-3
 #: Largest deviation of ``R Rᵀ`` from the identity accepted as a rotation.
 ORTHONORMAL_TOL = 1e-6
 
 
 # --------------------------------------------------------------------------- validation
 def _as_array(value: Any, camera: str, name: str, shape: tuple[int, ...]) -> np.ndarray:
+    if np.asarray(value).dtype.kind not in "iuf":
+        raise CalibrationError(f"expected numbers, got {np.asarray(value).dtype} values {value!r}",
+                               camera=camera, field=name)
     try:
         arr = np.array(value, dtype=np.float64)
     except (TypeError, ValueError) as exc:
@@ -126,9 +131,10 @@ class Camera:
                 camera=name,
                 field="K",
             )
-        if K[0, 0] <= 0 or K[1, 1] <= 0:
+        if not (K[0, 0] >= MIN_FOCAL and K[1, 1] >= MIN_FOCAL):
             raise CalibrationError(
-                f"focal lengths must be positive, got fx={K[0, 0]}, fy={K[1, 1]}",
+                f"focal lengths must be at least {MIN_FOCAL:g} (pixels, or 1 for normalised cameras), "
+                f"got fx={K[0, 0]:g}, fy={K[1, 1]:g}",
                 camera=name,
                 field="K",
             )
@@ -166,6 +172,10 @@ class Camera:
                 "determinant is -1 (a reflection, not a rotation)", camera=name, field="R"
             )
         t = _as_array(self.t, name, "t", (3,))
+        if any(isinstance(v, (bool, np.bool_, str)) for v in np.atleast_1d(np.asarray(self.size, dtype=object))):
+            raise CalibrationError(
+                f"expected two positive integers (width, height), got {self.size!r}", camera=name, field="size"
+            )
         try:
             w, h = (int(v) for v in self.size)
             exact = all(float(v) == int(v) for v in self.size)

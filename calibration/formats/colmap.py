@@ -101,6 +101,29 @@ def _intrinsics(cam, name: str, path: Path) -> tuple[np.ndarray, np.ndarray, str
     return K, dist, lens
 
 
+def _check_quaternions(path: Path) -> None:
+    """A zero quaternion in a text model is no rotation; pycolmap would normalise it silently."""
+    for name, first in (("images.txt", 1), ("frames.txt", 2)):
+        f = path / name
+        if not f.is_file():
+            continue
+        data = 0  # images.txt: two lines per image, the pose then its POINTS2D (possibly empty)
+        for number, line in enumerate(f.read_text(errors="replace").splitlines(), start=1):
+            if line.startswith("#"):
+                continue
+            data += 1
+            parts = line.split()
+            if (name == "images.txt" and data % 2 == 0) or len(parts) < first + 7:
+                continue
+            try:
+                q = np.array([float(v) for v in parts[first:first + 4]])
+            except ValueError:
+                continue  # a POINTS2D line, or pycolmap's own error will name it
+            if not np.all(np.isfinite(q)) or np.linalg.norm(q) < 1e-12:
+                raise CalibrationError(f"line {number}: quaternion {q.tolist()} is not a rotation "
+                                       "(zero or non-finite norm)", file=f, field="QW QX QY QZ")
+
+
 def read_colmap(path: str | PathLike):
     import pycolmap
 
@@ -109,6 +132,7 @@ def read_colmap(path: str | PathLike):
         path = path.parent
     if not ((path / "cameras.txt").exists() or (path / "cameras.bin").exists()):
         raise CalibrationError("not a COLMAP model folder (no cameras.txt or cameras.bin)", file=path)
+    _check_quaternions(path)
     try:
         rec = pycolmap.Reconstruction(str(path))
     except Exception as exc:  # pycolmap raises plain RuntimeError/ValueError on bad files
@@ -134,7 +158,12 @@ def read_colmap(path: str | PathLike):
             raise CalibrationError("no registered images", field="images")
         ground, meta = GroundPlane.floor(), {}
         sidecar = path / SIDECAR
-        if sidecar.exists():
+        if not sidecar.exists():
+            log.warning("%s: no %s beside the COLMAP model (COLMAP has no floor): the ground plane is "
+                        "assumed to be z = 0 — calibrate the floor (`studio calibrate floor`) if it is not",
+                        path, SIDECAR)
+            meta = {"ground_source": f"assumed z = 0: no {SIDECAR} in {path}"}
+        else:
             try:
                 doc = json.loads(sidecar.read_text())
                 if str(doc.get("version", 1)).split(".")[0] != "1":

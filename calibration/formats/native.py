@@ -89,10 +89,13 @@ def read_native(path: str | PathLike):
         text = path.read_text(encoding="utf-8")
     except OSError as exc:
         raise CalibrationError(f"cannot read ({exc.strerror})", file=path) from None
+    except UnicodeDecodeError as exc:
+        raise CalibrationError(f"not UTF-8 text (byte {exc.start}): expected a UTF-8 JSON file", file=path) from None
     try:
         doc = json.loads(text)
-    except json.JSONDecodeError as exc:
-        raise CalibrationError(f"not valid JSON ({exc})", file=path) from None
+    except (json.JSONDecodeError, RecursionError) as exc:
+        reason = "nested too deeply" if isinstance(exc, RecursionError) else str(exc)
+        raise CalibrationError(f"not valid JSON ({reason})", file=path) from None
     return rig_from_dict(doc, path)
 
 

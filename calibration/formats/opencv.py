@@ -58,11 +58,46 @@ def _paths(intri_path, extri_path) -> tuple[Path, Path]:
     return intri, Path(extri_path)
 
 
+#: Deepest flow nesting (``[[[...``) accepted: OpenCV's parser recurses and crashes the
+#: process (a segmentation fault, not an exception) on very deep input.
+MAX_NESTING = 64
+#: Largest calibration file read (bytes).
+MAX_BYTES = 64 << 20
+
+
+def _check_text(path: Path) -> None:
+    """Refuse what would crash or choke OpenCV's parser, naming the file: oversized files, non-UTF-8
+    text, flow collections nested deeper than ``MAX_NESTING``."""
+    size = path.stat().st_size
+    if size > MAX_BYTES:
+        raise CalibrationError(f"{size} bytes: larger than any calibration ({MAX_BYTES} bytes at most)", file=path)
+    data = path.read_bytes()
+    try:
+        data.decode("utf-8")
+    except UnicodeDecodeError as exc:
+        raise CalibrationError(f"not UTF-8 text (byte {exc.start}): expected a UTF-8 YAML/XML file", file=path) from None
+    depth = deepest = 0
+    for ch in _brackets(data):
+        depth += 1 if ch in b"[{" else -1
+        deepest = max(deepest, depth)
+        if deepest > MAX_NESTING:
+            raise CalibrationError(f"nested more than {MAX_NESTING} levels deep: not a calibration", file=path)
+
+
+def _brackets(data: bytes) -> bytes:
+    """Only the bracket bytes of ``data`` (a C-speed filter: ``bytes.translate`` deletes the rest)."""
+    return data.translate(None, _NOT_BRACKETS)
+
+
+_NOT_BRACKETS = bytes(b for b in range(256) if b not in b"[]{}")
+
+
 def _open(path: Path):
     import cv2
 
     if not path.is_file():
         raise CalibrationError("no such file", file=path)
+    _check_text(path)
     try:
         fs = cv2.FileStorage(str(path), cv2.FILE_STORAGE_READ)
         opened = fs.isOpened()
@@ -90,7 +125,26 @@ def _names(fs, path: Path) -> list[str]:
             names.append(f"{item.real():g}")
     if not names:
         raise CalibrationError("empty camera list", file=path, field="names")
+    for i, n in enumerate(names):
+        if names.index(n) != i:
+            raise CalibrationError(f"camera {n!r} is listed twice (entries {names.index(n)} and {i}): "
+                                   "expected unique names", file=path, field="names")
     return names
+
+
+def _is_number(node) -> bool:
+    return node.isReal() or node.isInt()
+
+
+def _check_numbers(node, path: Path, camera: str, key: str) -> None:
+    """Every element of a matrix node is a number (OpenCV reads text as 1.8e308 or 0)."""
+    data = node.getNode("data") if node.isMap() else node
+    items = [data.at(i) for i in range(data.size())] if data.isSeq() else [data]
+    for i, item in enumerate(items):
+        if not _is_number(item):
+            shown = item.string() if item.isString() else ("a mapping" if item.isMap() else "not a number")
+            raise CalibrationError(f"element {i} is {shown!r}: expected a number", file=path, camera=camera,
+                                   field=key)
 
 
 def _mat(fs, key: str, path: Path, camera: str, required: bool = True):
@@ -99,6 +153,7 @@ def _mat(fs, key: str, path: Path, camera: str, required: bool = True):
         if required:
             raise CalibrationError("missing", file=path, camera=camera, field=key)
         return None
+    _check_numbers(node, path, camera, key)
     if node.isMap() or node.isSeq():
         import cv2
 

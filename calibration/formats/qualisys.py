@@ -36,9 +36,12 @@ def _float(elem, attr: str, cam: str, field: str) -> float:
     if value is None:
         raise CalibrationError("missing", camera=cam, field=f"{field}.{attr}")
     try:
-        return float(value)
+        number = float(value)
     except ValueError:
         raise CalibrationError(f"not a number: {value!r}", camera=cam, field=f"{field}.{attr}") from None
+    if not np.isfinite(number):
+        raise CalibrationError(f"expected a finite number, got {value!r}", camera=cam, field=f"{field}.{attr}")
+    return number
 
 
 def _child(elem, tag: str, cam: str):
@@ -93,11 +96,16 @@ def read_qualisys(path: str | PathLike):
     try:
         cameras = {}
         residuals = {}
-        for elem in root.iter("camera"):
+        entry = {}
+        for k, elem in enumerate(root.iter("camera")):
             if elem.get("active", "1") == "0":
                 continue
             cam = _camera(elem)
+            if cam.name in cameras:
+                raise CalibrationError(f"<camera> entries {entry[cam.name]} and {k} share serial {cam.name!r}: "
+                                       "expected one entry per camera", field="serial")
             cameras[cam.name] = cam
+            entry[cam.name] = k
             if elem.get("avg-residual") is not None:
                 residuals[cam.name] = float(elem.get("avg-residual"))
         if not cameras:

@@ -83,8 +83,11 @@ def read_toml(path: str | PathLike):
             doc = tomllib.load(f)
     except OSError as exc:
         raise CalibrationError(f"cannot read ({exc.strerror})", file=path) from None
-    except tomllib.TOMLDecodeError as exc:
-        raise CalibrationError(f"not valid TOML ({exc})", file=path) from None
+    except UnicodeDecodeError as exc:
+        raise CalibrationError(f"not UTF-8 text (byte {exc.start}): expected a UTF-8 TOML file", file=path) from None
+    except (tomllib.TOMLDecodeError, RecursionError) as exc:
+        reason = "nested too deeply" if isinstance(exc, RecursionError) else str(exc)
+        raise CalibrationError(f"not valid TOML ({reason})", file=path) from None
     meta = dict(doc.get("metadata", {}))
     try:
         cameras = {}

@@ -38,6 +38,7 @@ resolved against the folder of the YAML file. Errors name the file and the field
 from __future__ import annotations
 
 import copy
+import math
 from collections.abc import Mapping
 from dataclasses import dataclass, field, replace
 from pathlib import Path
@@ -122,14 +123,71 @@ def _err(where: str, field_name: str, msg: str) -> RigError:
     return RigError(f"{where}: field {field_name!r}: {msg}")
 
 
-def _number(where: str, name: str, value: Any, *, positive: bool = True, allow_none=False):
+def _number(where: str, name: str, value: Any, *, positive: bool = True, allow_none=False,
+            low: float | None = None, high: float | None = None, integer: bool = False):
+    """``value`` as a finite number (an integer when ``integer``) within [low, high]."""
     if value is None and allow_none:
         return None
-    if isinstance(value, bool) or not isinstance(value, (int, float)):
-        raise _err(where, name, f"expected a number, got {value!r}")
+    kind = "an integer" if integer else "a number"
+    if isinstance(value, bool) or not isinstance(value, int if integer else (int, float)):
+        raise _err(where, name, f"expected {kind}, got {value!r}")
+    if not math.isfinite(value):
+        raise _err(where, name, f"expected a finite number, got {value!r}")
     if positive and value <= 0:
         raise _err(where, name, f"expected a positive number, got {value!r}")
+    if (low is not None and value < low) or (high is not None and value > high):
+        span = f">= {low}" if high is None else f"<= {high}" if low is None else f"between {low} and {high}"
+        raise _err(where, name, f"expected {kind} {span}, got {value!r}")
     return value
+
+
+#: Backend options with a numeric or boolean meaning: (integer, low, high) or bool.
+_OPTION_RULES: dict[str, tuple | type] = {
+    "queue_size": (True, 1, 100_000),
+    "max_frames": (True, 0, None),
+    "jitter_ms": (False, 0.0, 1000.0),
+    "clock_offset_ms": (False, -1e9, 1e9),
+    "drop_probability": (False, 0.0, 1.0),
+    "duplicate_probability": (False, 0.0, 1.0),
+    "realtime": bool,
+    "loop": bool,
+}
+#: Ranges of the camera fields (GenICam units: exposure in µs, gain in dB).
+EXPOSURE_US = (1.0, 60e6)
+GAIN_DB = (-20.0, 60.0)
+FRAME_RATE_HZ = (1e-3, 100_000.0)
+
+
+def _check_option(where: str, at: str, key: str, value: Any) -> None:
+    rule = _OPTION_RULES.get(key)
+    if rule is None or value is None:
+        return
+    if rule is bool:
+        if not isinstance(value, bool):
+            raise _err(where, f"{at}.{key}", f"expected true or false, got {value!r}")
+        return
+    integer, low, high = rule
+    _number(where, f"{at}.{key}", value, positive=False, low=low, high=high, integer=integer)
+
+
+class _UniqueKeyLoader(yaml.SafeLoader):
+    """PyYAML keeps the last of two equal keys silently (two cameras named alike become one):
+    this loader refuses the second, naming both lines."""
+
+    def construct_mapping(self, node, deep=False):
+        seen = {}
+        for key_node, _ in node.value:
+            key = self.construct_object(key_node, deep=True)
+            try:
+                hash(key)
+            except TypeError:
+                continue  # the base class reports unhashable keys
+            if key in seen:
+                raise yaml.constructor.ConstructorError(
+                    None, None, f"key {key!r} appears twice (lines {seen[key] + 1} and {key_node.start_mark.line + 1}): "
+                    "expected unique keys (two cameras or settings of the same name)", key_node.start_mark)
+            seen[key] = key_node.start_mark.line
+        return super().construct_mapping(node, deep)
 
 
 @dataclass(frozen=True)
@@ -157,10 +215,15 @@ class RigDescription:
             text = path.read_text(encoding="utf-8")
         except OSError as exc:
             raise RigError(f"rig description {path}: cannot read ({exc.strerror or exc})") from exc
+        except UnicodeDecodeError as exc:
+            raise RigError(f"rig description {path}: not UTF-8 text (byte {exc.start}): expected a UTF-8 YAML "
+                           "file") from None
         try:
-            data = yaml.safe_load(text)
+            data = yaml.load(text, Loader=_UniqueKeyLoader)  # noqa: S506 - a SafeLoader subclass
         except yaml.YAMLError as exc:
             raise RigError(f"rig description {path}: not valid YAML ({exc})") from exc
+        except RecursionError:
+            raise RigError(f"rig description {path}: nested too deeply to be a rig description") from None
         return cls.from_dict(data, path=path)
 
     @classmethod
@@ -185,7 +248,8 @@ class RigDescription:
         name = d.get("name", Path(path).stem if path is not None else "rig")
         if not isinstance(name, str) or not name:
             raise _err(where, "name", f"expected a non-empty string, got {name!r}")
-        frame_rate = float(_number(where, "frame_rate", d.get("frame_rate")))
+        frame_rate = float(_number(where, "frame_rate", d.get("frame_rate"), low=FRAME_RATE_HZ[0],
+                                   high=FRAME_RATE_HZ[1]))
         trigger = cls._trigger(where, d.get("trigger") or {})
         sync = cls._sync(where, d.get("sync") or {})
         calibration = d.get("calibration")
@@ -237,9 +301,7 @@ class RigDescription:
             raise _err(where, "sync.ptp", f"expected true/false, got {ptp!r}")
         tol = s.get("tolerance_ms", 2.0)
         if tol is not None:
-            tol = _number(where, "sync.tolerance_ms", tol, positive=False)
-            if tol < 0:
-                raise _err(where, "sync.tolerance_ms", f"expected >= 0 or null, got {tol}")
+            tol = _number(where, "sync.tolerance_ms", tol, positive=False, low=0.0, high=60_000.0)
             tol = int(round(tol * 1e6))
         key = s.get("key", "frame_id")
         if key not in ("frame_id", "timestamp"):
@@ -267,9 +329,13 @@ class RigDescription:
             if v is not None and (isinstance(v, bool) or not isinstance(v, int) or v <= 0):
                 raise _err(where, f"{at}.{key}", f"expected a positive integer, got {v!r}")
             size[key] = v
-        exposure = _number(where, f"{at}.exposure", c.get("exposure"), allow_none=True)
-        gain = _number(where, f"{at}.gain", c.get("gain"), positive=False, allow_none=True)
+        exposure = _number(where, f"{at}.exposure", c.get("exposure"), allow_none=True, low=EXPOSURE_US[0],
+                           high=EXPOSURE_US[1])
+        gain = _number(where, f"{at}.gain", c.get("gain"), positive=False, allow_none=True, low=GAIN_DB[0],
+                       high=GAIN_DB[1])
         options = {k: v for k, v in c.items() if k not in _CAMERA_KEYS}
+        for key, value in options.items():
+            _check_option(where, at, key, value)
         for key in PATH_OPTIONS:
             if key in options and options[key] is not None:
                 if not isinstance(options[key], (str, Path)):
@@ -298,11 +364,15 @@ class RigDescription:
                 top[key] = value
             elif key in ("exposure", "gain", "width", "height", "pixel_format"):
                 cams = {n: replace(c, **{key: value}) for n, c in cams.items()}
+                # re-validated like a file would be
+                self.from_dict({"format": FORMAT, "version": VERSION, "frame_rate": self.frame_rate,
+                                "cameras": {"override": {"backend": "x", key: value}}})
             elif key in ("trigger", "sync"):
                 if not isinstance(value, (TriggerConfig, SyncConfig)):
                     raise _err("override", key, f"expected a {key.title()}Config, got {value!r}")
                 top[key] = value
             else:
+                _check_option("override", "cameras.*", key, value)
                 if key in PATH_OPTIONS and value is not None:
                     value = Path(value).resolve()
                 cams = {n: replace(c, options={**c.options, key: value}) for n, c in cams.items()}

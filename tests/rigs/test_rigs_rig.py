@@ -294,10 +294,14 @@ def test_camera_feature_errors(source):
     [
         ({"no_source": True}, "needs option 'source'"),
         ({"bogus": 1}, "unknown simulated option 'bogus'"),
-        ({"drop_probability": 2}, "drop_probability must be a probability"),
+        ({"drop_probability": 2}, r"field 'cameras.cam0.drop_probability': expected a number between 0.0 and 1.0, got 2"),
         ({"duplicate_frames": 5}, "duplicate_frames must be a list"),
-        ({"max_frames": -1}, "max_frames must be a non-negative"),
-        ({"jitter_ms": -1.0}, "jitter_ms must be >= 0"),
+        ({"max_frames": -1}, r"field 'cameras.cam0.max_frames': expected an integer >= 0, got -1"),
+        ({"jitter_ms": -1.0}, r"field 'cameras.cam0.jitter_ms': expected a number between 0.0 and 1000.0"),
+        ({"jitter_ms": float("nan")}, r"field 'cameras.cam0.jitter_ms': expected a finite number, got nan"),
+        ({"queue_size": "8"}, r"field 'cameras.cam0.queue_size': expected an integer, got '8'"),
+        ({"queue_size": 2.5}, r"field 'cameras.cam0.queue_size': expected an integer, got 2.5"),
+        ({"realtime": "no"}, r"field 'cameras.cam0.realtime': expected true or false, got 'no'"),
         ({"source_camera": "camZ"}, "has no camera 'camZ'"),
     ],
 )

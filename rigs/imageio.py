@@ -242,8 +242,21 @@ def _check_png_bytes(data: bytes, path: Path) -> None:
         )
 
 
-def _read_png(path: Path) -> np.ndarray:
+def _check_size(info: ImageInfo, path: Path, max_size: tuple[int, int] | None, max_pixels: int) -> None:
+    """Refuse, from the header and before decoding, an image larger than expected."""
+    if max_size is not None and (info.width > max_size[0] or info.height > max_size[1]):
+        raise ImageIOError(f"image file {path} is {info.width}x{info.height}: larger than the "
+                           f"{max_size[0]}x{max_size[1]} expected (refused before decoding)")
+    if info.width * info.height > max_pixels:
+        raise ImageIOError(f"image file {path} is {info.width}x{info.height} = {info.width * info.height} pixels: "
+                           f"more than the limit of {max_pixels} (refused before decoding; "
+                           "pass max_pixels= to read larger images)")
+
+
+def _read_png(path: Path, max_size, max_pixels: int) -> np.ndarray:
     data = _read_bytes(path)
+    if len(data) >= 33 and data.startswith(PNG_SIGNATURE):
+        _check_size(_png_header(data[:33], path), path, max_size, max_pixels)
     _check_png_bytes(data, path)
     image = cv2.imdecode(np.frombuffer(data, np.uint8), cv2.IMREAD_UNCHANGED)
     if image is None:
@@ -271,7 +284,7 @@ def _exr_stack(channels: dict, path: Path) -> np.ndarray:
     return np.stack(planes, axis=-1).astype(np.float32, copy=False)
 
 
-def _read_exr(path: Path) -> np.ndarray:
+def _read_exr(path: Path, max_size, max_pixels: int) -> np.ndarray:
     import OpenEXR
 
     if not path.exists():
@@ -282,6 +295,7 @@ def _read_exr(path: Path) -> np.ndarray:
         raise ImageIOError(
             f"image file {path} is not an OpenEXR file (bad magic number; empty or truncated?)"
         )
+    _check_size(_exr_info(path), path, max_size, max_pixels)
     try:
         with OpenEXR.File(str(path), separate_channels=True) as exr:
             if not exr.parts:
@@ -291,26 +305,38 @@ def _read_exr(path: Path) -> np.ndarray:
         raise ImageIOError(f"image file {path} is corrupt or truncated: OpenEXR says {exc}") from exc
 
 
-def read_image(path: str | Path) -> np.ndarray:
+#: Largest image :func:`read_image` decodes unless told otherwise (a 40000×40000 PNG of a few
+#: kilobytes would otherwise allocate gigabytes): 100 megapixels.
+MAX_PIXELS = 100_000_000
+
+
+def read_image(path: str | Path, *, max_size: tuple[int, int] | None = None, max_pixels: int = MAX_PIXELS) -> np.ndarray:
     """Read a PNG (8/16-bit, gray/RGB/RGBA, returned in RGB order) or an OpenEXR (float32).
+
+    The header is read first: an image wider or taller than ``max_size`` ``(width, height)``
+    (e.g. the camera's declared size) or of more than ``max_pixels`` pixels is refused before
+    anything is decoded.
 
     Raises:
         FileNotFoundError: no such file (message names it).
-        ImageIOError: empty, truncated (PNG without its end chunk), corrupt, or an unsupported
-            suffix; the message names the file.
+        ImageIOError: empty, truncated (PNG without its end chunk), corrupt, too large, or an
+            unsupported suffix; the message names the file.
     """
     path = Path(path)
     suffix = path.suffix.lower()
     if suffix == ".png":
-        return _read_png(path)
+        return _read_png(path, max_size, max_pixels)
     if suffix == ".exr":
-        return _read_exr(path)
+        return _read_exr(path, max_size, max_pixels)
     raise ImageIOError(f"cannot read {path}: unsupported suffix '{path.suffix}' (expected .png or .exr)")
 
 
 def _png_info(path: Path) -> ImageInfo:
     with open(path, "rb") as fh:
-        head = fh.read(33)
+        return _png_header(fh.read(33), path)
+
+
+def _png_header(head: bytes, path: Path) -> ImageInfo:
     if len(head) < 33 or not head.startswith(PNG_SIGNATURE) or head[12:16] != b"IHDR":
         raise ImageIOError(f"image file {path} is not a valid PNG (missing or short IHDR header)")
     width, height, depth, colour = struct.unpack(">IIBB", head[16:26])

@@ -213,11 +213,13 @@ class Session:
         return index
 
     def _load(self, path: Path, camera: str, what: str) -> np.ndarray:
+        spec = self._spec(camera)
+        # the camera's declared size bounds what is decoded (a forged 40000x40000 header is refused first)
+        limit = (int(spec["width"]), int(spec["height"])) if spec is not None else None
         try:
-            image = imageio.read_image(path)
+            image = imageio.read_image(path, max_size=limit)
         except (OSError, ImageIOError) as exc:
             raise SessionError(f"camera '{camera}' {what}: {exc}") from exc
-        spec = self._spec(camera)
         if spec is not None:
             got = _image_spec(image)
             got["suffix"] = spec.get("suffix", got["suffix"])

@@ -326,3 +326,44 @@ def test_atomic_json_rejects_unserialisable(tmp_path):
     with pytest.raises(TypeError, match=r"not JSON-serialisable"):
         atomic_write_json(tmp_path / "j.json", {"a": float("nan")})
     assert list(tmp_path.iterdir()) == []
+
+
+def _forged_png(width: int, height: int) -> bytes:
+    """A PNG whose header claims ``width`` × ``height`` (8-bit RGB) with one tiny IDAT: decoding it
+    would allocate width × height × 3 bytes."""
+    import struct
+    import zlib
+
+    def chunk(kind, data):
+        return struct.pack(">I", len(data)) + kind + data + struct.pack(">I", zlib.crc32(kind + data) & 0xFFFFFFFF)
+
+    ihdr = struct.pack(">IIBBBBB", width, height, 8, 2, 0, 0, 0)
+    return (b"\x89PNG\r\n\x1a\n" + chunk(b"IHDR", ihdr) + chunk(b"IDAT", zlib.compress(b"\x00" * 64))
+            + chunk(b"IEND", b""))
+
+
+def test_huge_png_header_is_refused_before_decoding(tmp_path):
+    """Defect 10: a 40000x40000 header (a 100-byte file) used to be decoded, allocating 4.8 GB."""
+    p = tmp_path / "huge.png"
+    p.write_bytes(_forged_png(40000, 40000))
+    assert p.stat().st_size < 200
+    with pytest.raises(ImageIOError, match=r"huge\.png is 40000x40000 = 1600000000 pixels: more than the limit of 100000000"):
+        read_image(p)
+    with pytest.raises(ImageIOError, match=r"huge\.png is 40000x40000: larger than the 656x490 expected"):
+        read_image(p, max_size=(656, 490))
+    small = tmp_path / "small.png"
+    write_image(small, np.zeros((20, 30), np.uint8))
+    with pytest.raises(ImageIOError, match=r"small\.png is 30x20: larger than the 16x16 expected"):
+        read_image(small, max_size=(16, 16))
+    assert read_image(small, max_size=(30, 20)).shape == (20, 30)
+
+
+def test_session_bounds_decoding_by_the_cameras_size(tmp_path):
+    from rigs.session import Session, SessionError, SessionWriter
+
+    with SessionWriter.create(tmp_path / "s", ["cam0"]) as w:
+        w.write_frame(0, {"cam0": np.zeros((12, 16, 3), np.uint8)})
+    (tmp_path / "s" / "frames" / "cam0" / "000000.png").write_bytes(_forged_png(40000, 40000))
+    s = Session.open(tmp_path / "s")
+    with pytest.raises(SessionError, match=r"camera 'cam0' .*000000\.png is 40000x40000: larger than the 16x12 expected"):
+        s.image("cam0", 0)

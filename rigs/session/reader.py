@@ -131,6 +131,12 @@ class Session:
         return str(self.info.get("rig", "unknown"))
 
     @property
+    def drops(self) -> dict:
+        """What the capture lost (``session.json`` ``"drops"``, see :meth:`SessionWriter.record_drops`);
+        empty when nothing was recorded."""
+        return dict(self.info.get("drops") or {})
+
+    @property
     def frame_count(self) -> int:
         """Number of complete frames (``len(frame_indices)``)."""
         return len(self.frame_indices)

@@ -391,6 +391,17 @@ class SessionWriter:
         self._csv_size += len(line)
 
     # ------------------------------------------------------------------ closing
+    def record_drops(self, drops: Mapping[str, Any]) -> None:
+        """Record what the capture lost, written into ``session.json`` (``"drops"``) at close:
+        e.g. ``{"incomplete_instants": 3, "recorder_dropped": 0, "cameras": {cam: {"dropped": 2,
+        "late": 0, "duplicates": 0, "mismatched": 0, "queue_dropped": 1}}}``. Instants that not
+        every camera delivered have no row in ``frames.csv``; this is where they are counted."""
+        self._check_writable("record_drops")
+        try:
+            self._info["drops"] = json.loads(json.dumps(dict(drops), allow_nan=False))
+        except (TypeError, ValueError) as exc:
+            raise SessionError(f"record_drops: expected JSON-serialisable counts ({exc})") from None
+
     def close(self, status: str = "complete") -> None:
         """Close ``frames.csv`` and record ``status``, ``frame_count`` and ``end_time`` in
         ``session.json`` (atomically, fsynced). Closing twice does nothing."""

@@ -4,6 +4,7 @@ and the ``studio capture`` command."""
 from __future__ import annotations
 
 import errno
+import json
 import os
 import signal
 import subprocess
@@ -238,6 +239,16 @@ def test_studio_capture_command(tmp_path, source, capsys):
     # a duplicate, per camera, in the summary table row of cam1
     row = next(line for line in text.splitlines() if "cam1" in line)
     assert [int(x) for x in row.replace("│", " ").split()[1:]][3] == 1
+    # defect 5: the drops live in the session and `session info` shows the capture's figures
+    drops = s.drops
+    assert drops["incomplete_instants"] == 1 and drops["recorder_dropped"] == 0
+    assert drops["cameras"]["cam1"]["duplicates"] == 1 and sum(c["dropped"] for c in drops["cameras"].values()) >= 1
+    assert main(["session", "info", str(out)]) == 0
+    info = capsys.readouterr().out
+    assert "drops     1 incomplete trigger instant(s) not in frames.csv" in info
+    assert "cam1 dropped" in info and "duplicates 1" in info
+    assert main(["session", "info", str(out), "--json"]) == 0
+    assert json.loads(capsys.readouterr().out)["drops"] == drops
 
 
 @pytest.mark.parametrize(

@@ -124,6 +124,7 @@ def run(args: argparse.Namespace) -> int:
                     _record_background(rig, writer, args.background, console)
                 t_start = time.monotonic()
                 _record(rig, recorder, args.frames, console)
+                writer.record_drops(_drops(rig.stats, recorder.stats))
                 recorder.close()
                 elapsed = time.monotonic() - t_start
         except (RigError, SessionError) as exc:  # disk full, a camera failure, ...: one clear line
@@ -170,6 +171,18 @@ def _record_background(rig, writer, n: int, console) -> None:
     for i, mf in enumerate(rig.multiframes(n)):
         for cam, image in mf.images.items():
             writer.write_background(cam, i, image)
+
+
+def _drops(rig_stats, rstats) -> dict:
+    """The capture's losses as the session records them (``session info`` shows the same)."""
+    sync = rig_stats.sync
+    return {
+        "incomplete_instants": int(sync.incomplete),
+        "recorder_dropped": int(rstats.dropped),
+        "cameras": {n: {"dropped": int(sync.dropped[n]), "late": int(sync.late[n]),
+                        "duplicates": int(sync.duplicates[n]), "mismatched": int(sync.mismatched[n]),
+                        "queue_dropped": int(c.queue_dropped)} for n, c in rig_stats.cameras.items()},
+    }
 
 
 def _summary(out, names, rstats, rig_stats, elapsed: float) -> None:

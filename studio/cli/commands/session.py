@@ -101,6 +101,7 @@ def _info(args: argparse.Namespace) -> int:
         "calibration": session.calibration_path is not None,
         "truth": session.truth_dir is not None,
         "gaps": [[i, r] for i, r in session.gaps],
+        "drops": session.drops,
         "issues": list(session.issues),
     }
     if report is not None:
@@ -127,6 +128,12 @@ def _info(args: argparse.Namespace) -> int:
         print(f"calibration {'calibration.json' if summary['calibration'] else 'none'}; "
               f"truth {'yes' if summary['truth'] else 'no'}")  # fmt: skip
         print(f"gaps      {len(session.gaps)}")
+        drops = session.drops
+        if drops:
+            per_cam = ", ".join(f"{c} dropped {d['dropped']} late {d['late']} duplicates {d['duplicates']} "
+                                f"queue {d['queue_dropped']}" for c, d in drops.get("cameras", {}).items())
+            print(f"drops     {drops.get('incomplete_instants', 0)} incomplete trigger instant(s) not in frames.csv; "
+                  f"recorder dropped {drops.get('recorder_dropped', 0)}; {per_cam}")
         for index, reason in session.gaps[:MAX_LISTED]:
             print(f"  {index}: {reason}")
         if len(session.gaps) > MAX_LISTED:

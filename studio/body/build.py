@@ -24,11 +24,19 @@ from collections.abc import Callable
 from pathlib import Path
 
 import numpy as np
-import scipy.sparse as sp
 
 from studio.body import scape, skeleton
 from studio.body.skeleton import JOINT_KIND, PART_NAMES, PART_PARENTS
+from studio.body.anny_adapter import (
+    PART_FIRST_BONE,
+    _Anny,
+    anny_bone_transforms,
+    anny_joint_positions,
+    anny_truth_meshes,
+    bone_part,
+)
 from studio.body.storage import save_model_file
+from studio.body.template_build import _barycentric_map, _check_watertight, _decimate_template, _segment
 
 log = logging.getLogger(__name__)
 
@@ -37,217 +45,11 @@ __all__ = ["build_models", "add_measurement_samples", "anny_truth_meshes", "bone
 #: gender value ranges of Anny (0 = male, 1 = female) per population
 POPULATIONS = {"male": (0.0, 0.12), "female": (0.88, 1.0), "neutral": (0.0, 1.0)}
 
-#: first Anny bone of each part (its head is the joint centre / rotation pivot)
-PART_FIRST_BONE = {
-    "pelvis": "root",
-    "torso": "spine04",
-    "head": "neck02",
-    "upperarm_l": "upperarm01.L",
-    "lowerarm_l": "lowerarm01.L",
-    "hand_l": "wrist.L",
-    "upperarm_r": "upperarm01.R",
-    "lowerarm_r": "lowerarm01.R",
-    "hand_r": "wrist.R",
-    "upperleg_l": "upperleg01.L",
-    "lowerleg_l": "lowerleg01.L",
-    "foot_l": "foot.L",
-    "upperleg_r": "upperleg01.R",
-    "lowerleg_r": "lowerleg01.R",
-    "foot_r": "foot.R",
-}
-
-
-def bone_part(bone: str) -> str:
-    """The part an Anny bone belongs to (from its name)."""
-    side = "_l" if bone.endswith(".L") else "_r"
-    b = bone.split(".")[0]
-    if b in ("root", "pelvis", "spine05"):
-        return "pelvis"
-    if b in ("spine04", "spine03", "spine02", "spine01", "clavicle", "shoulder01", "breast", "neck01"):
-        return "torso"
-    if b.startswith(("neck", "head", "eye", "jaw", "tongue")) or b in ("special04",):
-        return "head"
-    if b.startswith("upperarm"):
-        return "upperarm" + side
-    if b.startswith("lowerarm"):
-        return "lowerarm" + side
-    if b.startswith(("wrist", "finger", "metacarpal")):
-        return "hand" + side
-    if b.startswith("upperleg"):
-        return "upperleg" + side
-    if b.startswith("lowerleg"):
-        return "lowerleg" + side
-    if b.startswith(("foot", "toe")):
-        return "foot" + side
-    return "head"
-
 
 # ----------------------------------------------------------------------------- anny access
-class _Anny:
-    """Thin access to Anny (torch), float64, no gradients."""
-
-    def __init__(self):
-        import anny
-        import torch
-
-        torch.set_grad_enabled(False)
-        self.torch = torch
-        self.m = anny.Anny(topology="anny-noeyes-notongue", local_changes="all").to(torch.float64)
-        self.labels = list(self.m.bone_labels)
-        self.parents = [int(p) for p in self.m.bone_parents]
-        self.faces = self.m.faces.numpy().astype(np.int64)
-        self.local_labels = list(self.m.local_change_labels)
-        w = self.m.vertex_bone_weights.numpy()
-        idx = self.m.vertex_bone_indices.numpy()
-        self.n_vertices = w.shape[0]
-        self.weights = sp.csr_matrix(
-            (w.ravel(), (np.repeat(np.arange(w.shape[0]), w.shape[1]), idx.ravel())),
-            shape=(w.shape[0], len(self.labels)),
-        )
-        from anny.anthropometry import Anthropometry
-
-        self.anthro = Anthropometry(self.m)
-
-    def rest(self, phen: np.ndarray, local: np.ndarray) -> tuple[np.ndarray, np.ndarray, dict]:
-        """Rest vertices (B, V, 3), bone heads (B, 104, 3), anthropometry dict of arrays."""
-        torch = self.torch
-        labels = self.m.phenotype_labels
-        pk = {k: torch.as_tensor(phen[:, i]) for i, k in enumerate(labels)}
-        lk = torch.as_tensor(local)
-        out = self.m(phenotype_kwargs=pk, local_changes_kwargs=lk)
-        rv = out["rest_vertices"]
-        anth = {k: v.numpy() for k, v in self.anthro(rv).items()}
-        return rv.numpy(), out["rest_bone_heads"].numpy(), anth
-
-    def skin(self, rest_vertices: np.ndarray, transforms: np.ndarray) -> np.ndarray:
-        """Anny's skinning of rest vertices (B, V, 3) with bone transforms (B, 104, 4, 4)."""
-        torch = self.torch
-        v = self.m.get_skinned_vertices(torch.as_tensor(rest_vertices), torch.as_tensor(transforms))
-        return v.numpy()
 
 
 # ----------------------------------------------------------------------------- template
-def _segment(anny: _Anny) -> np.ndarray:
-    """Part index of every Anny vertex: argmax of skinning weights summed per part."""
-    bp = np.array([PART_NAMES.index(bone_part(b)) for b in anny.labels])
-    P = sp.csr_matrix((np.ones(len(bp)), (np.arange(len(bp)), bp)), shape=(len(bp), 15))
-    return np.asarray((anny.weights @ P).argmax(axis=1)).ravel()
-
-
-def _weld(vertices: np.ndarray, faces: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Merge vertices closer than 0.1 µm (the decimated pieces share their kept borders)."""
-    q = np.round(vertices / 1e-7).astype(np.int64)
-    _, first, inverse = np.unique(q, axis=0, return_index=True, return_inverse=True)
-    return vertices[first], inverse.ravel()[faces]
-
-
-def _decimate_template(
-    V0: np.ndarray, F0: np.ndarray, vpart: np.ndarray, keep: dict[str, float]
-) -> tuple[np.ndarray, np.ndarray]:
-    """Symmetric decimation: decimate the +x half region by region (borders kept), mirror."""
-    import fast_simplification
-
-    V0 = V0.copy()
-    mid = np.abs(V0[:, 0]) < 1e-6
-    V0[mid, 0] = 0.0
-    cx = V0[F0].mean(axis=1)[:, 0]
-    half = F0[cx > 0]
-    fpart = vpart[half]
-    fpart = np.array([np.bincount(r, minlength=15).argmax() for r in fpart])
-    region = np.full(len(half), "body", dtype=object)
-    region[fpart == PART_NAMES.index("head")] = "head"
-    region[(fpart == PART_NAMES.index("hand_l")) | (fpart == PART_NAMES.index("hand_r"))] = "hand"
-    region[(fpart == PART_NAMES.index("foot_l")) | (fpart == PART_NAMES.index("foot_r"))] = "foot"
-    pieces_v, pieces_f = [], []
-    offset = 0
-    for name in ("body", "head", "hand", "foot"):
-        f = half[region == name]
-        used, inv = np.unique(f, return_inverse=True)
-        v, fl = V0[used], inv.reshape(-1, 3)
-        target = int(len(fl) * keep[name])
-        v2, f2 = fast_simplification.simplify(
-            v, fl.astype(np.int32), target_count=target, agg=7.0, preserve_border=True
-        )
-        pieces_v.append(v2)
-        pieces_f.append(f2 + offset)
-        offset += len(v2)
-    v = np.concatenate(pieces_v)
-    f = np.concatenate(pieces_f)
-    v, f = _weld(v, f)
-    # snap the seam on the symmetry plane, then mirror
-    on_plane = np.abs(v[:, 0]) < 1e-6
-    v[on_plane, 0] = 0.0
-    n = len(v)
-    vm = v * [-1.0, 1.0, 1.0]
-    allv = np.concatenate([v, vm])
-    allf = np.concatenate([f, f[:, ::-1] + n])
-    allv, allf = _weld(allv, allf)
-    # drop degenerate faces
-    good = (allf[:, 0] != allf[:, 1]) & (allf[:, 1] != allf[:, 2]) & (allf[:, 0] != allf[:, 2])
-    allf = allf[good]
-    used, inv = np.unique(allf, return_inverse=True)
-    return allv[used], inv.reshape(-1, 3)
-
-
-def _closest_on_triangles(p: np.ndarray, tri: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Closest points of p (N, 3) on triangles (N, K, 3, 3): distances (N, K), bary (N, K, 3)."""
-    a, b, c = tri[..., 0, :], tri[..., 1, :], tri[..., 2, :]
-    q = p[:, None, :]
-    e0, e1 = b - a, c - a
-    n = np.cross(e0, e1)
-    nn = np.maximum(np.einsum("...i,...i", n, n), 1e-30)
-    # projection barycentrics
-    w = q - a
-    d00, d01, d11 = (np.einsum("...i,...i", x, y) for x, y in ((e0, e0), (e0, e1), (e1, e1)))
-    d20, d21 = np.einsum("...i,...i", w, e0), np.einsum("...i,...i", w, e1)
-    den = np.maximum(d00 * d11 - d01 * d01, 1e-30)
-    v = (d11 * d20 - d01 * d21) / den
-    u = (d00 * d21 - d01 * d20) / den
-    bary = np.stack([1 - v - u, v, u], axis=-1)
-    inside = np.all(bary >= 0, axis=-1)
-    best_b = bary.copy()
-    best_d = np.abs(np.einsum("...i,...i", w, n)) / np.sqrt(nn)
-    best_d = np.where(inside, best_d, np.inf)
-    verts = (a, b, c)
-    for i, j in ((0, 1), (1, 2), (2, 0)):
-        s0, s1 = verts[i], verts[j]
-        seg = s1 - s0
-        t = np.clip(np.einsum("...i,...i", q - s0, seg) / np.maximum(np.einsum("...i,...i", seg, seg), 1e-30), 0, 1)
-        d = np.linalg.norm(q - (s0 + t[..., None] * seg), axis=-1)
-        bb = np.zeros_like(bary)
-        bb[..., i] = 1 - t
-        bb[..., j] = t
-        better = d < best_d
-        best_d = np.where(better, d, best_d)
-        best_b = np.where(better[..., None], bb, best_b)
-    return best_d, best_b
-
-
-def _barycentric_map(V0: np.ndarray, F0: np.ndarray, points: np.ndarray, k: int = 12) -> sp.csr_matrix:
-    """Sparse (P, V0) map: each point as barycentric combination of its closest triangle."""
-    from scipy.spatial import cKDTree
-
-    vf = sp.csr_matrix(
-        (np.ones(F0.size), (F0.ravel(), np.repeat(np.arange(len(F0)), 3))), shape=(len(V0), len(F0))
-    )
-    _, nn = cKDTree(V0).query(points, k=k)
-    rows, cols, vals = [], [], []
-    for i, pt in enumerate(points):
-        cand = np.unique(vf[nn[i]].indices)
-        d, b = _closest_on_triangles(pt[None], V0[F0[cand]][None])
-        j = int(np.argmin(d[0]))
-        rows += [i] * 3
-        cols += list(F0[cand[j]])
-        vals += list(b[0, j])
-    M = sp.csr_matrix((vals, (rows, cols)), shape=(len(points), len(V0)))
-    M.sum_duplicates()
-    return M
-
-
-def _check_watertight(faces: np.ndarray) -> int:
-    e = np.sort(np.concatenate([faces[:, [0, 1]], faces[:, [1, 2]], faces[:, [2, 0]]]), axis=1)
-    _, counts = np.unique(e, axis=0, return_counts=True)
-    return int(np.sum(counts != 2))
 
 
 # ----------------------------------------------------------------------------- sampling
@@ -345,27 +147,6 @@ def sample_poses(n: int, limits: np.ndarray, rng: np.random.Generator, spread: f
         if kind == "ball":  # the rest (0) lies inside every ball joint's box
             poses[:, s] = rng.uniform(-1, 1, (n, 3)) * half[s] * 0.35
     return np.clip(poses, limits[:, 0], limits[:, 1])
-
-
-def anny_bone_transforms(
-    anny: _Anny, bone_heads: np.ndarray, G: np.ndarray, part_joint_bone: list[int]
-) -> np.ndarray:
-    """Bone transforms (B, 104, 4, 4) applying the part rotations G about the joint pivots."""
-    B = G.shape[0]
-    bp = np.array([PART_NAMES.index(bone_part(b)) for b in anny.labels])
-    piv = bone_heads[:, part_joint_bone]  # (B, 15, 3) rest joint centres
-    posed = np.zeros_like(piv)
-    for p, parent in enumerate(PART_PARENTS):
-        if parent < 0:
-            posed[:, p] = piv[:, p]
-        else:
-            posed[:, p] = posed[:, parent] + np.einsum("bij,bj->bi", G[:, parent], piv[:, p] - piv[:, parent])
-    T = np.zeros((B, len(anny.labels), 4, 4))
-    Rb = G[:, bp]
-    T[..., :3, :3] = Rb
-    T[..., :3, 3] = posed[:, bp] - np.einsum("bkij,bkj->bki", Rb, piv[:, bp])
-    T[..., 3, 3] = 1.0
-    return T
 
 
 # ----------------------------------------------------------------------------- main build
@@ -564,14 +345,6 @@ def build_models(
     return summary
 
 
-def anny_joint_positions(rest_joints: np.ndarray, G: np.ndarray) -> np.ndarray:
-    """Posed joint centres (15, 3) of Anny's posing (pivots at rest joints, root fixed)."""
-    posed = np.zeros_like(rest_joints)
-    for p, parent in enumerate(PART_PARENTS):
-        posed[p] = rest_joints[p] if parent < 0 else posed[parent] + G[parent] @ (rest_joints[p] - rest_joints[parent])
-    return posed
-
-
 def _joint_pairs(fpart: np.ndarray, centroids: np.ndarray, joints: np.ndarray) -> np.ndarray:
     """The two joints nearest each triangle among those adjacent to its part (eq. 3.16)."""
     adj: list[list[int]] = [[] for _ in range(15)]
@@ -645,69 +418,3 @@ def symmetrize_joint_regressor(W: np.ndarray, mirror: np.ndarray) -> np.ndarray:
     return out
 
 
-_ANNY_SINGLETON: list[_Anny] = []
-
-
-def anny_truth_meshes(
-    phenotypes: dict[str, np.ndarray] | np.ndarray,
-    poses: np.ndarray,
-    local_changes: np.ndarray | None = None,
-    model_path: Path | None = None,
-) -> dict[str, np.ndarray]:
-    """Posed Anny bodies placed in the frame of :class:`studio.body.BodyModel` (build extra).
-
-    Independent "truth" bodies for simulation and evaluation: Anny's own shape and skinning,
-    driven by this toolkit's pose vectors (part rotations about Anny's joint centres) and
-    placed by the model's convention (standing on z = 0, pelvis centroid over the origin
-    at zero translation, facing -y, root rotation about the pelvis centroid).
-
-    ``phenotypes``: dict label → (B,) or array (B, 6) in Anny's phenotype order
-    (gender 0 = male … 1 = female, age ≈ 0.77–0.83 for adults, muscle, weight, height,
-    proportions, all in [0, 1]); ``poses`` (B, 30); ``local_changes`` (B, 256) or None.
-    Returns ``vertices`` (B, V, 3) in the model topology, ``anny_vertices`` (B, 13348, 3)
-    and ``anny_faces`` at full resolution, ``joints`` (B, 15, 3) (joint centres).
-    """
-    from studio.body.model import DATA_FILE, anny_correspondence
-
-    path = Path(model_path) if model_path else DATA_FILE
-    if not _ANNY_SINGLETON:
-        _ANNY_SINGLETON.append(_Anny())
-    anny = _ANNY_SINGLETON[0]
-    poses = np.atleast_2d(np.asarray(poses, dtype=np.float64))
-    B = len(poses)
-    labels = list(anny.m.phenotype_labels)
-    if isinstance(phenotypes, dict):
-        phen = np.full((B, len(labels)), 0.5)
-        phen[:, labels.index("age")] = 0.8
-        for k, v in phenotypes.items():
-            if k not in labels:
-                raise ValueError(f"unknown Anny phenotype {k!r}: expected some of {labels}")
-            phen[:, labels.index(k)] = v
-    else:
-        phen = np.broadcast_to(np.asarray(phenotypes, dtype=np.float64), (B, len(labels))).copy()
-    local = np.zeros((B, len(anny.local_labels))) if local_changes is None else np.asarray(local_changes, float)
-    with np.load(path) as z:
-        hinge_axes = z["hinge_axes"]
-        vparts = z["vertex_parts"]
-    M = anny_correspondence(path)
-    rest, heads, _ = anny.rest(phen, local)
-    part_joint_bone = [anny.labels.index(PART_FIRST_BONE[n]) for n in PART_NAMES]
-    G, _ = skeleton.part_rotations(poses, hinge_axes)
-    T = anny_bone_transforms(anny, heads, G, part_joint_bone)
-    full = anny.skin(rest, T)
-    pel = vparts == PART_NAMES.index("pelvis")
-    out_v, out_full, out_j = [], [], []
-    for b in range(B):
-        y_rest = M @ rest[b]
-        y = M @ full[b]
-        anchor = y_rest[pel].mean(axis=0)[2] - y_rest[:, 2].min()
-        shift = -y[pel].mean(axis=0) + [0.0, 0.0, anchor] + poses[b, :3]
-        out_v.append(y + shift)
-        out_full.append(full[b] + shift)
-        out_j.append(anny_joint_positions(heads[b, part_joint_bone], G[b]) + shift)
-    return {
-        "vertices": np.stack(out_v),
-        "anny_vertices": np.stack(out_full),
-        "anny_faces": anny.faces,
-        "joints": np.stack(out_j),
-    }

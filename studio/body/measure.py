@@ -109,8 +109,7 @@ def _scan(vertices, faces, z0, z1, step=0.005):
 
 def t_pose(model, shape) -> np.ndarray:
     """Pose with the upper arms horizontal (±x) and the elbows straight."""
-    from studio.body.scape import rotvec_to_matrix  # noqa: F401  (doc link)
-
+    
     pose = model.default_pose()
     J = model.joints(shape, pose)
     from studio.body.skeleton import pose_slices

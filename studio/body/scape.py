@@ -25,8 +25,6 @@ __all__ = [
     "triangle_edges",
     "triangle_frames",
     "deformation_gradients",
-    "rotvec_to_matrix",
-    "matrix_to_rotvec",
     "procrustes_rotation",
     "edge_operator",
     "PoissonSolver",
@@ -68,49 +66,6 @@ def deformation_gradients(
     """
     inv = np.linalg.inv(triangle_frames(template, faces))
     return triangle_frames(deformed, faces) @ inv
-
-
-def rotvec_to_matrix(rotvec: np.ndarray) -> np.ndarray:
-    """Rodrigues' formula (App. B): (..., 3) axis-angle → (..., 3, 3) rotation.
-
-    >>> np.allclose(rotvec_to_matrix(np.array([0, 0, np.pi / 2])) @ [1, 0, 0], [0, 1, 0])
-    True
-    """
-    rotvec = np.asarray(rotvec, dtype=float)
-    theta = np.linalg.norm(rotvec, axis=-1)
-    K = np.zeros(rotvec.shape[:-1] + (3, 3))
-    K[..., 0, 1], K[..., 0, 2] = -rotvec[..., 2], rotvec[..., 1]
-    K[..., 1, 0], K[..., 1, 2] = rotvec[..., 2], -rotvec[..., 0]
-    K[..., 2, 0], K[..., 2, 1] = -rotvec[..., 1], rotvec[..., 0]
-    small = theta < 1e-6
-    t = np.where(small, 1.0, theta)
-    a = np.where(small, 1.0 - theta**2 / 6.0, np.sin(t) / t)[..., None, None]
-    b = np.where(small, 0.5 - theta**2 / 24.0, (1.0 - np.cos(t)) / t**2)[..., None, None]
-    return np.eye(3) + a * K + b * (K @ K)
-
-
-def matrix_to_rotvec(R: np.ndarray) -> np.ndarray:
-    """Inverse of :func:`rotvec_to_matrix`, (..., 3, 3) → (..., 3), angle in [0, π]."""
-    R = np.asarray(R, dtype=float)
-    w = np.stack(
-        [R[..., 2, 1] - R[..., 1, 2], R[..., 0, 2] - R[..., 2, 0], R[..., 1, 0] - R[..., 0, 1]],
-        axis=-1,
-    )
-    s = 0.5 * np.linalg.norm(w, axis=-1)
-    c = np.clip(0.5 * (np.trace(R, axis1=-2, axis2=-1) - 1.0), -1.0, 1.0)
-    theta = np.arctan2(s, c)
-    scale = np.where(s > 1e-8, theta / np.maximum(2 * s, 1e-300), 0.5)
-    out = w * scale[..., None]
-    # near π: axis from the symmetric part
-    near_pi = (c < -0.999) & (s < 1e-3)
-    if np.any(near_pi):
-        Rp = R[near_pi]
-        B = 0.5 * (Rp + np.eye(3))
-        idx = np.argmax(np.diagonal(B, axis1=-2, axis2=-1), axis=-1)
-        axis = B[np.arange(len(B)), :, idx]
-        axis /= np.linalg.norm(axis, axis=-1, keepdims=True)
-        out[near_pi] = axis * theta[near_pi][..., None]
-    return out
 
 
 def procrustes_rotation(source: np.ndarray, target: np.ndarray) -> np.ndarray:

@@ -13,7 +13,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from studio.body.scape import rotvec_to_matrix
+from calibration.rotation import rotvec_to_matrix
 
 __all__ = [
     "PART_NAMES",
@@ -110,7 +110,7 @@ def joint_rotvecs(G: np.ndarray) -> np.ndarray:
     ``G`` (..., 15, 3, 3) global part rotations → (..., 15, 3); entry p is the rotation of
     part p relative to its parent, expressed in the parent's frame (root row: zeros).
     """
-    from studio.body.scape import matrix_to_rotvec
+    from calibration.rotation import matrix_to_rotvec
 
     parents = np.array(PART_PARENTS[1:])
     rel = np.swapaxes(G[..., parents, :, :], -1, -2) @ G[..., 1:, :, :]

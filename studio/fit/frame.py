@@ -197,7 +197,7 @@ def _partitioned_search(cost, x, sigma, lo, hi, groups, *, n_particles, n_layers
 def _heading(pose: np.ndarray) -> float:
     """Root yaw (rad) of ``pose``: the angle about z that turns the template's facing
     direction (-y) into the body's (the root rotation's tilt ignored)."""
-    from studio.body.scape import rotvec_to_matrix
+    from calibration.rotation import rotvec_to_matrix
 
     f = rotvec_to_matrix(np.asarray(pose[3:6], dtype=np.float64)) @ [0.0, -1.0, 0.0]
     return float(np.arctan2(f[1], f[0]) + np.pi / 2)

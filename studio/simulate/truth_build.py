@@ -39,7 +39,10 @@ from pathlib import Path
 
 import numpy as np
 
+from calibration.rotation import matrix_to_rotvec, rotvec_to_matrix
 from rigs.atomic import atomic_open
+from studio.body.anny_adapter import bone_part
+from studio.body.skeleton import PART_NAMES
 
 __all__ = ["SEQUENCES", "build_truth", "straight_t_pose", "PART_NAMES", "QUANT_SCALE"]
 
@@ -47,36 +50,6 @@ log = logging.getLogger(__name__)
 
 QUANT_SCALE = 1e-4  # metres per int16 step (covers ±3.27 m)
 
-#: Coarse body parts (the thesis' 15 parts) from Anny bone-name prefixes.
-PART_NAMES = (
-    "pelvis", "torso", "head", "upperarm_l", "lowerarm_l", "hand_l", "upperarm_r",
-    "lowerarm_r", "hand_r", "upperleg_l", "lowerleg_l", "foot_l", "upperleg_r",
-    "lowerleg_r", "foot_r",
-)
-
-
-def _bone_part(label: str) -> str:
-    side = "l" if label.endswith(".L") else "r"
-    base = label.split(".")[0]
-    if base in ("root", "pelvis"):
-        return "pelvis"
-    if base.startswith("spine") or base in ("clavicle", "shoulder01"):
-        return "torso"
-    if base.startswith("neck") or base in ("head", "eye", "jaw") or base.startswith("tongue"):
-        return "head"
-    if base.startswith("upperarm"):
-        return f"upperarm_{side}"
-    if base.startswith("lowerarm"):
-        return f"lowerarm_{side}"
-    if base.startswith(("wrist", "finger", "metacarpal")):
-        return f"hand_{side}"
-    if base.startswith("upperleg"):
-        return f"upperleg_{side}"
-    if base.startswith("lowerleg"):
-        return f"lowerleg_{side}"
-    if base.startswith(("foot", "toe")):
-        return f"foot_{side}"
-    return "torso"
 
 
 # --------------------------------------------------------------------------- poses
@@ -87,12 +60,10 @@ def _rot(axis: str, deg: float) -> np.ndarray:
 
 def _compose(*rotvecs: np.ndarray) -> np.ndarray:
     """Axis-angle of ``R(r_0) @ R(r_1) @ ...``."""
-    import cv2
-
     R = np.eye(3)
     for r in rotvecs:
-        R = R @ cv2.Rodrigues(np.asarray(r, dtype=np.float64))[0]
-    return cv2.Rodrigues(R)[0].ravel()
+        R = R @ rotvec_to_matrix(r)
+    return matrix_to_rotvec(R)
 
 
 # Anny rest pose: Z up, facing -Y, left = +X, arms ~47° below horizontal ("A-pose").
@@ -258,21 +229,13 @@ def straight_t_pose(model, phenotype: dict) -> tuple[np.ndarray, np.ndarray]:
 
 
 def _slice_perimeter(V: np.ndarray, F: np.ndarray, z: float, keep) -> float:
-    """Tape-measure perimeter: convex hull of the mesh cross-section at height z."""
-    import cv2
+    """Tape-measure perimeter at height z: the fit's own slice and hull (:mod:`studio.body.measure`),
+    restricted to the points ``keep`` selects."""
+    from studio.body.measure import convex_perimeter, slice_points
 
-    a, b, c = V[F[:, 0]], V[F[:, 1]], V[F[:, 2]]
-    pts = []
-    for p, q in ((a, b), (b, c), (c, a)):
-        s = (p[:, 2] - z) * (q[:, 2] - z) < 0
-        w = (z - p[s, 2]) / (q[s, 2] - p[s, 2])
-        pts.append(p[s] + w[:, None] * (q[s] - p[s]))
-    P = np.concatenate(pts)
+    P = slice_points(V, F, z)
     P = P[keep(P)]
-    if len(P) < 3:
-        return float("nan")
-    hull = cv2.convexHull(P[:, :2].astype(np.float32))
-    return float(cv2.arcLength(hull, True))
+    return convex_perimeter(P) if len(P) >= 3 else float("nan")
 
 
 def _measurements(model, rest: np.ndarray, tpose: np.ndarray, F: np.ndarray) -> dict:
@@ -333,7 +296,7 @@ def build_truth(out_dir: str | Path, names: list[str] | None = None, progress=No
     vb_idx = model.vertex_bone_indices.cpu().numpy()
     vb_w = model.vertex_bone_weights.cpu().numpy()
     dominant = vb_idx[np.arange(len(vb_idx)), np.argmax(vb_w, axis=1)]
-    part_of_bone = np.array([PART_NAMES.index(_bone_part(b)) for b in labels], dtype=np.uint8)
+    part_of_bone = np.array([PART_NAMES.index(bone_part(b)) for b in labels], dtype=np.uint8)
     parts = part_of_bone[dominant]
     written = []
     for name in names:

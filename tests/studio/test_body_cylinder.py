@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 
 from studio.body import PART_NAMES, BodyModel, BodyModelError, CylinderModel
-from studio.body.scape import rotvec_to_matrix
+from calibration.rotation import rotvec_to_matrix
 
 
 @pytest.fixture(scope="module")

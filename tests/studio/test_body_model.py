@@ -5,7 +5,7 @@ import pytest
 
 from studio.body import GENDERS, PART_NAMES, POSE_SIZE, BodyModel, BodyModelError
 from studio.body.model import DATA_FILE
-from studio.body.scape import rotvec_to_matrix
+from calibration.rotation import rotvec_to_matrix
 
 
 @pytest.fixture(scope="module")

@@ -1,6 +1,8 @@
 """SCAPE algebra on small analytic meshes (no model file needed)."""
 
 import numpy as np
+
+from calibration.rotation import matrix_to_rotvec, rotvec_to_matrix
 import pytest
 
 from studio.body import scape, skeleton
@@ -19,20 +21,20 @@ def test_rotvec_round_trip_and_known_rotation():
     rng = np.random.default_rng(0)
     rv = rng.normal(size=(50, 3))
     rv *= (rng.uniform(0, 3.0, 50) / np.linalg.norm(rv, axis=1))[:, None]
-    R = scape.rotvec_to_matrix(rv)
+    R = rotvec_to_matrix(rv)
     assert np.allclose(R @ np.swapaxes(R, 1, 2), np.eye(3), atol=1e-12)
-    assert np.allclose(scape.matrix_to_rotvec(R), rv, atol=1e-9)
-    Rz = scape.rotvec_to_matrix(np.array([0, 0, np.pi / 2]))
+    assert np.allclose(matrix_to_rotvec(R), rv, atol=1e-9)
+    Rz = rotvec_to_matrix(np.array([0, 0, np.pi / 2]))
     assert np.allclose(Rz @ [1, 0, 0], [0, 1, 0])
     near_pi = np.array([0.0, np.pi - 1e-9, 0.0])
-    assert np.allclose(scape.rotvec_to_matrix(scape.matrix_to_rotvec(scape.rotvec_to_matrix(near_pi))),
-                       scape.rotvec_to_matrix(near_pi), atol=1e-6)
+    assert np.allclose(rotvec_to_matrix(matrix_to_rotvec(rotvec_to_matrix(near_pi))),
+                       rotvec_to_matrix(near_pi), atol=1e-6)
 
 
 def test_procrustes_recovers_rotation():
     rng = np.random.default_rng(1)
     src = rng.normal(size=(30, 3))
-    R = scape.rotvec_to_matrix(np.array([0.3, -1.2, 0.5]))
+    R = rotvec_to_matrix(np.array([0.3, -1.2, 0.5]))
     tgt = src @ R.T + [1.0, 2.0, 3.0]
     assert np.allclose(scape.procrustes_rotation(src, tgt), R, atol=1e-10)
 
@@ -51,7 +53,7 @@ def test_deformation_gradient_of_linear_map_is_the_map():
 def test_poisson_solver_reconstructs_rotated_scaled_mesh():
     v, f = cube()
     solver = scape.PoissonSolver(f, len(v))
-    R = scape.rotvec_to_matrix(np.array([0.2, 0.4, -0.1]))
+    R = rotvec_to_matrix(np.array([0.2, 0.4, -0.1]))
     target = 1.5 * v @ R.T
     edges = scape.triangle_edges(target, f)
     y = solver.solve(edges)
@@ -99,7 +101,7 @@ def test_skeleton_rotations_compose_down_the_tree():
     pose[sl[1]] = [0.3, 0.0, 0.0]  # torso
     pose[sl[2]] = [0.2]  # head hinge about x
     G, L = skeleton.part_rotations(pose, axes)
-    assert np.allclose(G[2], scape.rotvec_to_matrix(np.array([0.5, 0, 0])))
+    assert np.allclose(G[2], rotvec_to_matrix(np.array([0.5, 0, 0])))
     assert np.allclose(G[0], np.eye(3)) and np.allclose(G[9], np.eye(3))
     rv = skeleton.joint_rotvecs(G)
     assert np.allclose(rv[1], [0.3, 0, 0]) and np.allclose(rv[2], [0.2, 0, 0])
@@ -118,3 +120,18 @@ def test_large_batches_split_over_threads_give_the_single_call_result(monkeypatc
     np.testing.assert_allclose(solver._back_substitute(rhs), solver._lu.solve(rhs), atol=1e-12)
     y = solver.solve(edges)
     np.testing.assert_allclose(y, targets - targets[:, :1], atol=1e-10)
+
+
+@pytest.mark.parametrize("angle", [np.pi - 1e-6, np.pi])
+def test_joint_angles_near_pi_come_back_with_their_axis(angle):
+    """The old SCAPE inverse lost the axis near π; the skeleton's relative rotations now go
+    through calibration.rotation (SciPy), exact there."""
+    from studio.body.skeleton import joint_rotvecs
+
+    axis = np.array([0.2, -0.6, 0.77]) / np.linalg.norm([0.2, -0.6, 0.77])
+    G = np.repeat(np.eye(3)[None], 15, axis=0)
+    G[3] = rotvec_to_matrix(axis * angle)  # upper left arm turned by ~π relative to the torso
+    rv = joint_rotvecs(G)
+    got = rv[..., 3, :]
+    assert abs(np.linalg.norm(got) - angle) < 1e-9
+    assert abs(abs(got @ axis) / np.linalg.norm(got) - 1.0) < 1e-9

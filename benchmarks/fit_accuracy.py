@@ -70,7 +70,7 @@ def main(argv=None) -> int:
     from studio.simulate import ensure_rendered
 
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--spec", type=Path, default=ROOT / "sample_sequences" / "walk" / "spec.yaml")
+    ap.add_argument("--spec", type=Path, default=ROOT / "studio" / "samples" / "walk" / "spec.yaml")
     ap.add_argument("--frames", default="0:24:4")
     ap.add_argument("--workers", type=int, default=2)
     ap.add_argument("--quick", action="store_true")

@@ -52,7 +52,7 @@ def main(argv=None) -> int:
     from studio.simulate import ensure_rendered
 
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--spec", type=Path, default=ROOT / "sample_sequences" / "walk" / "spec.yaml")
+    ap.add_argument("--spec", type=Path, default=ROOT / "studio" / "samples" / "walk" / "spec.yaml")
     ap.add_argument("--sequence", type=int, default=20, help="frames of the sequence timing (0: skip)")
     ap.add_argument("--quick", action="store_true")
     args = ap.parse_args(argv)

@@ -5,7 +5,7 @@ Parts, one run, side by side:
 1. **Simulated multi-view session** with truth (``truth/labels/<cam>/NNNNNN.png``): person and
    shadow precision / recall / F1 per camera before and after multi-view voting. Targets:
    person F1 ≥ 0.97, shadow F1 ≥ 0.90 after voting. ``--session DIR`` picks the session;
-   without it, a simulator session under ``sample_sequences/`` (or ``--search``) is used if one
+   without it, a simulator session under ``studio/samples/`` (or ``--search``) is used if one
    has truth labels, else the box scene of :mod:`studio.segment.synthetic` (said so).
 2. **CDnet 2014 highway** (real, single view): the background is learned robustly (per-pixel
    median-trimmed statistics) from frames 1–469, which have cars in them (CDnet has no
@@ -376,14 +376,14 @@ def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--session", type=Path, default=None, help="simulated session with truth/labels")
     ap.add_argument("--search", type=Path, action="append", default=None,
-                    help="folders to search for a simulated session (default: sample_sequences/)")  # fmt: skip
+                    help="folders to search for a simulated session (default: studio/samples/)")  # fmt: skip
     ap.add_argument("--quick", action="store_true", help="fewer frames everywhere")
     ap.add_argument("--workers", type=int, default=2)
     ap.add_argument("--skip", action="append", default=[], choices=["sim", "cdnet", "skin", "speed"])
     args = ap.parse_args(argv)
     results = {"date": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime())}
     if "sim" not in args.skip:
-        session = args.session or find_sim_session(args.search or [REPO / "sample_sequences"])
+        session = args.session or find_sim_session(args.search or [REPO / "studio" / "samples"])
         results["simulated"] = bench_simulated(session, args.quick)
     if "cdnet" not in args.skip:
         results["cdnet_highway"] = bench_cdnet(args.quick)

@@ -33,7 +33,7 @@ def main() -> None:
     from studio.render import rasterize, shadow_mask, silhouette
     from studio.simulate import Scene, apply_sensor, load_spec
 
-    spec = load_spec(ROOT / "sample_sequences" / "walk" / "spec.yaml")
+    spec = load_spec(ROOT / "studio" / "samples" / "walk" / "spec.yaml")
     scene = Scene(spec, seed=0)
     cams = scene.cameras
     F = scene.body.faces

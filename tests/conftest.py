@@ -14,3 +14,18 @@ def shared_data() -> Path:
     if not SHARED_DATA.is_dir():
         pytest.skip(f"real data not found at {SHARED_DATA} (clone with ../shared beside the repo)")
     return SHARED_DATA
+
+
+@pytest.fixture(scope="session", autouse=True)
+def _render_cache(tmp_path_factory):
+    """Renders made by tests go to a temporary cache, never the user's ``~/.cache/studio``
+    (set in the environment so subprocesses inherit it)."""
+    import os
+
+    previous = os.environ.get("STUDIO_CACHE")
+    os.environ["STUDIO_CACHE"] = str(tmp_path_factory.mktemp("studio-cache"))
+    yield
+    if previous is None:
+        os.environ.pop("STUDIO_CACHE", None)
+    else:
+        os.environ["STUDIO_CACHE"] = previous

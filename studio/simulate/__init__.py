@@ -7,6 +7,7 @@ Runtime code is numpy/OpenCV only; the true bodies are built once from Anny by
 
 from studio.simulate.scene import Body, FrameRender, Scene, load_body, ring_cameras, skin_tone_rgb
 from studio.simulate.sensor import apply_sensor, bayer_mosaic, demosaic
+from studio.simulate.samples import SAMPLES, cache_root
 from studio.simulate.session import default_cache_dir, ensure_rendered, simulate
 from studio.simulate.spec import SimSpec, SpecError, load_spec
 
@@ -18,6 +19,8 @@ __all__ = [
     "SpecError",
     "apply_sensor",
     "bayer_mosaic",
+    "SAMPLES",
+    "cache_root",
     "default_cache_dir",
     "demosaic",
     "ensure_rendered",

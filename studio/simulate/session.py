@@ -215,9 +215,11 @@ def _write_body(scene: Scene, truth: Path, index: int, frame: int) -> None:
 
 
 def default_cache_dir(spec: SimSpec) -> Path:
-    """``$STUDIO_CACHE/<name>`` when set, else ``<spec folder>/_render``."""
-    env = os.environ.get("STUDIO_CACHE")
-    return Path(env) / spec.name if env else spec.folder / "_render"
+    """``<cache root>/renders/<name>`` (:func:`studio.simulate.samples.cache_root`: ``$STUDIO_CACHE``,
+    ``$XDG_CACHE_HOME/studio`` or ``~/.cache/studio``), never beside the spec."""
+    from studio.simulate.samples import cache_root
+
+    return cache_root() / "renders" / spec.name
 
 
 def _complete(folder: Path, digest: str) -> bool:

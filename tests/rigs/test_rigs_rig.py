@@ -39,7 +39,7 @@ def test_shipped_default_rig():
     assert desc.camera_names == ["cam0", "cam1", "cam2", "cam3"]
     for cam in desc.cameras.values():
         assert (cam.backend, cam.pixel_format, cam.width, cam.height) == ("simulated", "RGB8", 656, 490)
-        assert cam.options["source"].parts[-3:] == ("sample_sequences", "walk", "spec.yaml")
+        assert cam.options["source"].parts[-3:] == ("samples", "walk", "spec.yaml")
     assert desc.sync.ptp and desc.sync.tolerance_ns == 2_000_000
     assert desc.trigger.genicam == {"TriggerMode": "On", "TriggerSelector": "FrameStart", "TriggerSource": "Software"}
 

@@ -128,8 +128,10 @@ def test_same_seed_gives_identical_files(rendered, tmp_path):
 def test_ensure_rendered_caches_and_rerenders(tmp_path, monkeypatch):
     spec = make_spec(tmp_path / "scene", cameras={"count": 1, "size": [80, 60], "focal_px": 80.0},
                      background_frames=1)
+    monkeypatch.delenv("STUDIO_CACHE", raising=False)
+    monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path / "xdg"))
     first = ensure_rendered(spec, seed=0)
-    assert first == tmp_path / "scene" / "_render" / "seed0"
+    assert first == tmp_path / "xdg" / "studio" / "renders" / "tiny" / "seed0"  # never beside the spec
     stamp = (first / "frames.csv").stat().st_mtime_ns
     assert ensure_rendered(spec, seed=0) == first
     assert (first / "frames.csv").stat().st_mtime_ns == stamp
@@ -137,7 +139,8 @@ def test_ensure_rendered_caches_and_rerenders(tmp_path, monkeypatch):
     again = ensure_rendered(spec, seed=0)
     assert json.loads((again / "session.json").read_text())["fps"] == 25.0
     monkeypatch.setenv("STUDIO_CACHE", str(tmp_path / "cache"))
-    assert ensure_rendered(spec, seed=3) == tmp_path / "cache" / "tiny" / "seed3"
+    assert ensure_rendered(spec, seed=3) == tmp_path / "cache" / "renders" / "tiny" / "seed3"
+    assert not (tmp_path / "scene" / "_render").exists()
 
 
 def test_sensor_effects():

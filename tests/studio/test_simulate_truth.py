@@ -8,9 +8,10 @@ import numpy as np
 import pytest
 
 from studio.simulate import load_body, load_spec
-from studio.simulate.truth_build import PART_NAMES, SEQUENCES, STATIC_POSES, _bone_part, build_truth, walk_pose
+from studio.body.anny_adapter import bone_part
+from studio.simulate.truth_build import PART_NAMES, SEQUENCES, STATIC_POSES, build_truth, walk_pose
 
-ROOT = Path(__file__).resolve().parents[2] / "sample_sequences"
+ROOT = Path(__file__).resolve().parents[2] / "studio" / "samples"
 
 
 def test_bone_parts_cover_the_15_parts():
@@ -18,7 +19,9 @@ def test_bone_parts_cover_the_15_parts():
              "lowerarm01.R", "wrist.L", "finger3-2.R", "upperleg01.R", "lowerleg02.L", "toe1-1.R",
              "foot.L", "upperarm01.R", "lowerarm02.L", "metacarpal1.R", "upperleg02.L",
              "lowerleg01.R", "foot.R"]
-    assert {_bone_part(b) for b in bones} == set(PART_NAMES)
+    assert {bone_part(b) for b in bones} == set(PART_NAMES)
+    # the one map (the model's): the spine's lowest bone is pelvis, the lowest neck bone torso
+    assert bone_part("spine05") == "pelvis" and bone_part("neck01") == "torso" and bone_part("neck02") == "head"
 
 
 def test_walk_cycle_is_periodic_and_antisymmetric():

@@ -14,7 +14,7 @@ from studio.body.measure import MEASUREMENT_NAMES, measure_anny_body, measure_me
 from studio.report.measurements import REPORTED, measurement_table, write_measurements
 from studio.simulate.session import studio_truth
 
-ROOT = Path(__file__).resolve().parents[2] / "sample_sequences"
+ROOT = Path(__file__).resolve().parents[2] / "studio" / "samples"
 
 
 @pytest.fixture(scope="module")

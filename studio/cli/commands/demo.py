@@ -9,7 +9,9 @@ from __future__ import annotations
 import time
 from pathlib import Path
 
-DEFAULT_SPEC = Path(__file__).resolve().parents[3] / "sample_sequences" / "walk" / "spec.yaml"
+from studio.simulate.samples import SAMPLES
+
+DEFAULT_SPEC = SAMPLES / "walk" / "spec.yaml"
 
 NOT_DONE = (
     "Not done yet by the demo (later issues):\n"

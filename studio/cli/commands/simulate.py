@@ -26,7 +26,7 @@ def register(subparsers) -> None:
     p.add_argument("names", nargs="*", help="build-truth: sequences to build (default all)")
     p.add_argument("--spec", type=Path, help="scene spec (spec.yaml or its folder)")
     p.add_argument("--out", type=Path, help="session folder to write (build-truth: the "
-                   "sample_sequences folder; default ./sample_sequences)")
+                   "samples folder; default: the installed studio/samples)")
     p.add_argument("--seed", type=int, default=None, help="override the spec's seed")
     p.add_argument("--overwrite", action="store_true", help="replace an existing session")
     p.add_argument("--sheet", type=Path, help="also write a contact sheet PNG of one multi-frame "
@@ -73,7 +73,9 @@ def run(args: argparse.Namespace) -> int:
 def _build_truth(args: argparse.Namespace) -> int:
     from studio.simulate.truth_build import SEQUENCES, build_truth
 
-    out = args.out or Path("sample_sequences")
+    from studio.simulate import SAMPLES
+
+    out = args.out or SAMPLES
     names = args.names or list(SEQUENCES)
     for path in build_truth(out, names):
         print(f"wrote {path}")

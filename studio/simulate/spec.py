@@ -23,6 +23,7 @@ from __future__ import annotations
 import copy
 import hashlib
 import json
+import math
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -141,6 +142,8 @@ def _merge(defaults: dict, given: dict, where: str, src: str) -> dict:
 def _number(value, src: str, field: str, lo: float | None = None, hi: float | None = None) -> float:
     if isinstance(value, bool) or not isinstance(value, (int, float)):
         raise SpecError(f"{src}: {field} must be a number, got {value!r}")
+    if not math.isfinite(value):
+        raise SpecError(f"{src}: {field} must be a finite number, got {value!r}")
     if (lo is not None and value < lo) or (hi is not None and value > hi):
         raise SpecError(f"{src}: {field} must lie in [{lo}, {hi}], got {value!r}")
     return float(value)
@@ -163,7 +166,7 @@ def validate(data: dict, src: str) -> dict:
         raise SpecError(f"{src}: cameras.count must be a positive integer, got {count!r}")
     size = cams["size"]
     if (not isinstance(size, (list, tuple)) or len(size) != 2
-            or not all(isinstance(v, int) and v > 0 for v in size)):
+            or not all(isinstance(v, int) and not isinstance(v, bool) and v > 0 for v in size)):
         raise SpecError(f"{src}: cameras.size must be [width, height] positive integers, got {size!r}")
     for key in ("radius", "height", "focal_px"):
         _number(cams[key], src, f"cameras.{key}", 1e-6)

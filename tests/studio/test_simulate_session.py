@@ -167,6 +167,8 @@ def test_spec_errors(tmp_path):
              ({"lights": []}, r"lights must be a non-empty list"),
              ({"lights": [{"type": "spot"}]}, r"lights\[0\].type"),
              ({"cameras": {"size": [10]}}, r"cameras.size must be"),
+             ({"cameras": {"size": [True, True]}}, r"cameras.size must be \[width, height\] positive integers, got \[True, True\]"),
+             ({"fps": float("nan")}, r"fps must be a finite number, got nan"),
              ({"person": {"top": {"sleeves": "huge"}}}, r"person.top.sleeves"),
              ({"person": {"bottom": {"length": "x"}}}, r"person.bottom.length"),
              ({"person": {"skin_tone": 2}}, r"person.skin_tone must lie in"),

@@ -65,9 +65,13 @@ def test_a_z_down_world_and_a_tilted_floor(tmp_path):
 
 
 def test_implausible_focal_length_is_refused():
-    cam = Camera("a", np.array([[1e-300, 0, 16], [0, 1e-300, 12], [0, 0, 1]]), np.zeros(5), np.eye(3),
-                 np.array([0, 0, 3.0]), SIZE)
-    with pytest.raises(WorkspaceError, match=r"camera 'a': field 'K': expected focal lengths between 0.1 and 1e\+07 px"):
+    from calibration import CalibrationError
+
+    K = lambda f: np.array([[f, 0, 16], [0, f, 12], [0, 0, 1]])  # noqa: E731
+    with pytest.raises(CalibrationError, match=r"camera 'a': field 'K': focal lengths must be at least 0.001"):
+        Camera("a", K(1e-300), np.zeros(5), np.eye(3), np.array([0, 0, 3.0]), SIZE)
+    cam = Camera("a", K(1e9), np.zeros(5), np.eye(3), np.array([0, 0, 3.0]), SIZE)
+    with pytest.raises(WorkspaceError, match=r"calib.json: camera 'a': field 'K': expected focal lengths between 0.1 and 1e\+07 px, got fx=1e\+09"):
         validate_calibration(RigCalibration(cameras={"a": cam}), {"a": SIZE}, source="calib.json")
 
 

@@ -1,7 +1,7 @@
 """The one atomic writer: every file the toolkit writes goes through this module.
 
 A file is written under a unique hidden temporary name in its destination folder
-(``.NAME.tmp-XXXXXXXX.SUFFIX``, created with ``O_EXCL`` by :func:`tempfile.mkstemp`, so two
+(``.NAME.tmp-<random>.SUFFIX``, created with ``O_EXCL`` by :func:`tempfile.mkstemp`, so two
 writers, threads or processes, never share one), flushed with ``fsync`` when asked, and
 renamed over ``NAME`` with :func:`os.replace`. A reader therefore sees the old file or the
 new one, never a torn one, and a crash at any instant leaves at most a temporary file that

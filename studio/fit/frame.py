@@ -36,10 +36,11 @@ from studio.blas import one_blas_thread
 from studio.body import BodyModel
 from studio.body.skeleton import JOINT_KIND, POSE_SIZE, pose_slices
 from studio.cost import SilhouetteTarget
-from studio.fit.errors import FitError
+from studio.fit.errors import FitError, UnusableFrame
 from studio.body.inverse import shape_from_measurements
 from studio.fit.init import hull_centroid, hull_height, initial_poses
 from studio.fit.objective import CylinderObjective, FrameObjective, pose_bounds
+from studio.fit.quality import fit_quality, screen_masks
 from studio.optimize import Stage, annealed_particle_filter, staged_nelder_mead, thesis_stages
 
 __all__ = ["FitOptions", "FrameFit", "fit_frame", "fit_frame_gender"]
@@ -110,7 +111,9 @@ class FitOptions:
 @dataclass(frozen=True, eq=False)
 class FrameFit:
     """Result of one frame: ``shape`` (n_shape,), ``pose`` (POSE_SIZE,), ``joints`` (15, 3),
-    ``costs`` term by term at full resolution, ``timings`` (s) per step."""
+    ``costs`` term by term at full resolution, ``timings`` (s) per step, ``quality`` the
+    quality gates' object (:func:`studio.fit.quality.fit_quality`; ``status`` ok / suspect /
+    failed with the reasons)."""
 
     frame: int
     gender: str
@@ -121,6 +124,12 @@ class FrameFit:
     timings: dict
     n_evaluations: int
     settings: dict = field(default_factory=dict)
+    quality: dict = field(default_factory=dict)
+
+    @property
+    def status(self) -> str:
+        """``ok``, ``suspect`` or ``failed`` (``unchecked`` for results written before the gates)."""
+        return self.quality.get("status", "unchecked")
 
     def to_json(self) -> dict:
         return {
@@ -135,6 +144,7 @@ class FrameFit:
             "timings": self.timings,
             "n_evaluations": int(self.n_evaluations),
             "settings": self.settings,
+            "quality": self.quality,
         }
 
     @classmethod
@@ -145,6 +155,7 @@ class FrameFit:
             frame=int(obj["frame"]), gender=obj["gender"], shape=np.asarray(obj["shape"], float),
             pose=np.asarray(obj["pose"], float), joints=np.asarray(obj["joints"], float), costs=obj["costs"],
             timings=obj["timings"], n_evaluations=int(obj["n_evaluations"]), settings=obj.get("settings", {}),
+            quality=obj.get("quality") or {},
         )
 
 
@@ -231,6 +242,7 @@ def fit_frame(
     hint_pose=None,
     options: FitOptions = FitOptions(),
     seed=0,
+    screen: dict | None = None,
 ) -> FrameFit:
     """Fit ``model`` to one frame's observed silhouettes.
 
@@ -240,6 +252,11 @@ def fit_frame(
     pose is initialised from the silhouettes; ``hint_pose`` (e.g. another frame's fitted pose)
     then joins the heading hypotheses as one more start, moved to the silhouettes' floor
     centroid. Deterministic for a given ``seed``.
+
+    The silhouettes are screened first (``screen``: :func:`studio.fit.quality.screen_masks`,
+    computed when None): views with an empty or all-image mask are left out, and a frame with
+    fewer than two usable views raises :class:`~studio.fit.errors.UnusableFrame`. The result
+    carries the quality gates (:attr:`FrameFit.quality`).
     """
     cameras = list(cameras)
     masks = [np.asarray(m, dtype=bool) for m in masks]
@@ -248,8 +265,13 @@ def fit_frame(
     for c, m in zip(cameras, masks, strict=True):
         if m.shape != (c.size[1], c.size[0]):
             raise FitError(f"camera {c.name}: mask is {m.shape[1]}x{m.shape[0]}, calibration says {c.size[0]}x{c.size[1]}")
-        if not m.any():
-            raise FitError(f"camera {c.name}: empty silhouette in frame {frame}")
+    screen = screen_masks(cameras, masks) if screen is None else screen
+    if screen["status"] == "failed":
+        raise UnusableFrame(frame, {"version": 1, "status": "failed", "reasons": screen["reasons"],
+                                    "views": screen["views"], "dropped_views": screen["dropped"],
+                                    "segmentation_status": "failed"})
+    used = [i for i, c in enumerate(cameras) if c.name not in screen["dropped"]]
+    cameras, masks = [cameras[i] for i in used], [masks[i] for i in used]
     rng = np.random.default_rng(seed)
     t_start = time.perf_counter()
     timings = {}
@@ -365,6 +387,9 @@ def fit_frame(
     shapes, poses = obj.split(fin.x[None])
     shape_out, pose_out = shapes[0], model.clip_pose(poses[0])
     costs = obj.terms(obj.pack(shape_out, pose_out), final)
+    t = time.perf_counter()
+    quality = fit_quality(model, cameras, masks, shape_out, pose_out, costs, screen)
+    timings["quality"] = time.perf_counter() - t
     costs["particle_filter_best"] = apf_cost
     costs["search"] = c_pose
     if rival_cost is not None:
@@ -379,6 +404,7 @@ def fit_frame(
         joints=model.joints(shape_out, pose_out), costs=costs, timings={k: round(v, 4) for k, v in timings.items()},
         n_evaluations=int(pose_obj.n_evaluations + obj.n_evaluations
                           + (apf_obj.n_evaluations if apf_obj is not pose_obj else 0)), settings=options.to_dict(),
+        quality=quality,
     )
 
 
@@ -387,6 +413,8 @@ def fit_frame_gender(cameras, masks, gender: str = "auto", **kwargs) -> FrameFit
     and keep the lower total cost (thesis §4.7.2)."""
     if gender != "auto":
         return fit_frame(BodyModel.load(gender), cameras, masks, **kwargs)
+    if kwargs.get("screen") is None:
+        kwargs["screen"] = screen_masks(cameras, [np.asarray(m, dtype=bool) for m in masks])
     fits = [fit_frame(BodyModel.load(g), cameras, masks, **kwargs) for g in ("female", "male")]
     best = min(fits, key=lambda f: f.costs["total"])
     best.costs["gender_costs"] = {f.gender: f.costs["total"] for f in fits}

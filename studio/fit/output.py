@@ -11,7 +11,7 @@ from pathlib import Path
 
 import numpy as np
 
-__all__ = ["OVERLAY_COLORS", "overlay_image", "write_frame_fit"]
+__all__ = ["OVERLAY_COLORS", "overlay_image", "write_frame_fit", "write_unfitted"]
 
 #: RGB colours of the overlay classes.
 OVERLAY_COLORS = {
@@ -72,3 +72,16 @@ def write_frame_fit(layout, fit, model, cameras, masks, images=None, run: dict |
     if run is not None:
         obj["run"] = run
     return atomic_write_json(layout.fit_json(fit.frame), obj)
+
+
+def write_unfitted(layout, error, run: dict | None = None) -> Path:
+    """Write ``fit/NNNNNN.json`` of a frame the quality gates refused to fit
+    (:class:`~studio.fit.errors.UnusableFrame` ``error``): its ``quality`` object (status
+    ``failed``, the reasons) and no body, so no figure is ever read off it."""
+    from rigs.atomic import atomic_write_json
+
+    layout.fit_dir.mkdir(parents=True, exist_ok=True)
+    obj = {"format": "studio.fit", "version": 1, "frame": error.frame, "fitted": False, "quality": error.quality}
+    if run is not None:
+        obj["run"] = run
+    return atomic_write_json(layout.fit_json(error.frame), obj)

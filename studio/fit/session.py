@@ -30,12 +30,13 @@ from collections.abc import Callable
 
 import numpy as np
 
-from studio.fit.errors import FitError
+from studio.fit.errors import FitError, UnusableFrame
 from studio.fit.frame import FitOptions, FrameFit, fit_frame, fit_frame_gender
-from studio.fit.output import write_frame_fit
+from studio.fit.output import write_frame_fit, write_unfitted
+from studio.fit.quality import screen_masks, summary_line
 from studio.workers import worker_pool
 
-__all__ = ["fit_session", "load_fits", "open_workspace"]
+__all__ = ["fit_session", "load_fits", "load_quality", "open_workspace"]
 
 log = logging.getLogger(__name__)
 
@@ -89,16 +90,25 @@ def _fit_chunk(job: dict) -> list[dict]:
     out = []
     for frame in job["frames"]:
         masks = _masks(ws, frame)
+        screen = screen_masks(cameras, masks)
+        if screen["status"] == "failed":
+            err = UnusableFrame(frame, {"version": 1, "status": "failed", "reasons": screen["reasons"],
+                                        "views": screen["views"], "dropped_views": screen["dropped"],
+                                        "segmentation_status": "failed"})
+            log.warning("%s", err)
+            write_unfitted(ws.layout, err, run=job["run"])
+            out.append(json.loads(ws.layout.fit_json(frame).read_text()))
+            continue
         track = prev is not None and abs(frame - prev_frame) <= MAX_TRACK_GAP
         hint = prev if prev is not None else job.get("hint_pose")
         fit = fit_frame(model, cameras, masks, frame=frame, shape=shape,
                         previous_pose=prev if track else None, hint_pose=None if track else hint,
-                        options=options, seed=job["seed"] + frame)
+                        options=options, seed=job["seed"] + frame, screen=screen)
         if track and fit.costs["total"] > RECOVERY_FACTOR * job["key_cost"]:
             # tracking lost the body: search again from the silhouettes, keep the better fit
             log.info("frame %d: tracking cost %.2f, re-initialising from the silhouettes", frame, fit.costs["total"])
             again = fit_frame(model, cameras, masks, frame=frame, shape=shape, hint_pose=prev,
-                              options=options, seed=job["seed"] + frame + 1)
+                              options=options, seed=job["seed"] + frame + 1, screen=screen)
             if again.costs["total"] < fit.costs["total"]:
                 fit = again
         write_frame_fit(ws.layout, fit, model, cameras, masks, _images(ws, frame), run=job["run"])
@@ -164,20 +174,36 @@ def fit_session(
     if done:
         log.info("%d of %d frame(s) already fitted with the same settings: kept (--force fits them again)",
                  len(done), total)
-    # 1. key frame: shape free, gender chosen
-    if key in done:
-        key_fit = FrameFit.from_json(done[key])
-    else:
+    results = {f: done[f] for f in done}
+    # 1. key frame: shape free, gender chosen — the first frame the quality gates let through
+    key_fit = None
+    for key in frames:
+        if key in done:
+            if done[key].get("fitted", True):
+                key_fit = FrameFit.from_json(done[key])
+                break
+            continue
         masks = _masks(ws, key)
-        key_fit = fit_frame_gender(cameras, masks, gender, frame=key, options=options, seed=seed + key)
+        try:
+            key_fit = fit_frame_gender(cameras, masks, gender, frame=key, options=options, seed=seed + key)
+        except UnusableFrame as err:
+            log.warning("%s", err)
+            write_unfitted(ws.layout, err, run=run)
+            results[key] = json.loads(ws.layout.fit_json(key).read_text())
+            if progress:
+                progress(len(results), total)
+            continue
         model = BodyModel.load(key_fit.gender)
         write_frame_fit(ws.layout, key_fit, model, cameras, masks, _images(ws, key), run=run)
-    results = {f: done[f] for f in done}
+        break
+    if key_fit is None:
+        raise FitError(f"{ws.path}: no frame passed the segmentation checks ({summary_line(_qualities(results))}); "
+                       f"results in {ws.layout.fit_dir}")
     results[key] = key_fit.to_json() | {"run": run}
     if progress:
         progress(len(results), total)
     # 2. other frames, shape held, in contiguous chunks
-    rest = [f for f in frames[1:] if f not in done]
+    rest = [f for f in frames if f not in results]
     n_chunks = max(1, min(workers, len(rest)))
     chunks = [list(c) for c in np.array_split(np.asarray(rest, dtype=int), n_chunks) if len(c)]
     jobs = [{"path": str(ws.path), "out": str(ws.layout.root), "gender": key_fit.gender,
@@ -205,11 +231,13 @@ def fit_session(
         "gender": key_fit.gender,
         "gender_costs": key_fit.costs.get("gender_costs"),
         "key_shape": key_fit.shape.tolist(),
-        "shape": np.mean([results[f]["shape"] for f in results], axis=0).tolist(),
+        "shape": np.mean([results[f]["shape"] for f in results if "shape" in results[f]], axis=0).tolist(),
         "key_frame": key,
         "frames": sorted(results),
         "kept": sorted(done),
-        "costs": {str(f): results[f]["costs"]["total"] for f in sorted(results)},
+        "costs": {str(f): results[f]["costs"]["total"] for f in sorted(results) if "costs" in results[f]},
+        "quality": {str(f): (results[f].get("quality") or {}).get("status", "unchecked") for f in sorted(results)},
+        "quality_summary": summary_line(_qualities(results)),
         "workers": workers,
         "wall_time": round(time.perf_counter() - t0, 3),
         "settings": options.to_dict(),
@@ -220,13 +248,35 @@ def fit_session(
     return summary
 
 
+def _qualities(results: dict) -> dict:
+    return {f: r.get("quality") or {"status": "ok", "reasons": []} for f, r in results.items()}
+
+
+def load_quality(source, frames: list[int] | None = None) -> dict[int, dict]:
+    """The ``quality`` objects of a session's ``fit/NNNNNN.json`` by frame, frames the gates
+    refused to fit included (their status ``failed``); ``frames`` as for :func:`load_fits`.
+    Results written before the gates have status ``unchecked``."""
+    lay = _layout(source)
+    if frames is None and lay.fit_sequence.is_file():
+        frames = json.loads(lay.fit_sequence.read_text()).get("frames")
+    out = {}
+    for p in sorted(lay.fit_dir.glob("[0-9]*.json")) if lay.fit_dir.is_dir() else []:
+        if frames is None or int(p.stem) in frames:
+            out[int(p.stem)] = json.loads(p.read_text()).get("quality") or {"status": "unchecked", "reasons": []}
+    return out
+
+
+def _layout(source):
+    from studio.workspace import Layout, Workspace
+
+    return source.layout if isinstance(source, Workspace) else source if isinstance(source, Layout) else Layout(source)
+
+
 def load_fits(source, frames: list[int] | None = None) -> dict[int, FrameFit]:
     """The ``fit/NNNNNN.json`` results of a session (a Workspace, a Layout or a folder), by frame:
     ``frames``, or those of the last :func:`fit_session` run (``fit/sequence.json``), or else
     every result in the folder."""
-    from studio.workspace import Layout, Workspace
-
-    lay = source.layout if isinstance(source, Workspace) else source if isinstance(source, Layout) else Layout(source)
+    lay = _layout(source)
     root = lay.fit_dir
     if not root.is_dir():
         raise FitError(f"{lay.root}: no fit/ folder — run `studio fit {lay.source}` first")
@@ -235,7 +285,9 @@ def load_fits(source, frames: list[int] | None = None) -> dict[int, FrameFit]:
     out = {}
     for p in sorted(root.glob("[0-9]*.json")):
         if frames is None or int(p.stem) in frames:
-            out[int(p.stem)] = FrameFit.from_json(json.loads(p.read_text()))
+            obj = json.loads(p.read_text())
+            if obj.get("fitted", True):  # frames the quality gates refused carry no body
+                out[int(p.stem)] = FrameFit.from_json(obj)
     if not out:
         raise FitError(f"{root}: no fitted frames — run `studio fit {lay.source}` first")
     return out

@@ -67,10 +67,37 @@ def _measurement_figure(table: dict) -> str:
     return figure_base64(fig)
 
 
+_STATUS_STYLE = {"ok": "#1a7f37", "suspect": "#b35900", "failed": "#c0000f", "unchecked": "#777"}
+
+
+def _status_html(status: str, reasons=()) -> str:
+    """A coloured status word, its reasons as the hover text (and spelled out when not ok)."""
+    text = "; ".join(reasons)
+    tail = f" <small>{_esc(text)}</small>" if text and status != "ok" else ""
+    return (f"<b style='color:{_STATUS_STYLE.get(status, '#777')}' title='{_esc(text)}'>"
+            f"{'⚠ ' if status not in ('ok', 'unchecked') else ''}{_esc(status)}</b>{tail}")
+
+
+def _reason_texts(quality: dict) -> list[str]:
+    return [(f"{r['view']}: " if r.get("view") else "") + r["message"] for r in quality.get("reasons", [])]
+
+
+def _quality_html(qualities: dict) -> str:
+    """One row per frame (fitted or refused): status, precision / recall, reasons."""
+    rows = ["<tr><th>frame</th><th>status</th><th>precision</th><th>recall</th><th>reasons</th></tr>"]
+    for f in sorted(qualities):
+        q = qualities[f]
+        pr = "".join(f"<td>{q[k]:.3f}</td>" if isinstance(q.get(k), (int, float)) else "<td>–</td>"
+                     for k in ("silhouette_precision", "silhouette_recall"))
+        rows.append(f"<tr><td>{_esc(f)}</td><td>{_status_html(q.get('status', 'unchecked'))}</td>{pr}"
+                    f"<td style='text-align:left'>{_esc('; '.join(_reason_texts(q)) or '–')}</td></tr>")
+    return "<table>" + "".join(rows) + "</table>"
+
+
 def _table_html(table: dict) -> str:
     has_truth = any(r["truth"] is not None for r in table.values())
     has_anny = any(r.get("truth_anny") is not None and r.get("truth_source") == "studio" for r in table.values())
-    head = "<tr><th>measurement</th><th>mean ± std over frames</th>"
+    head = "<tr><th>measurement</th><th>mean ± std over frames</th><th>quality</th>"
     head += "<th>truth</th><th>error</th>" if has_truth else ""
     head += "<th>truth (Anny's definition)</th><th>error</th>" if has_anny else ""
     rows = [head + "</tr>"]
@@ -80,7 +107,12 @@ def _table_html(table: dict) -> str:
 
     for name, r in table.items():
         u = _esc(r["unit"])
-        row = f"<tr><td>{_esc(name.replace('_', ' '))}</td><td>{r['mean']:.1f} ± {r['std']:.1f} {u}</td>"
+        st = r.get("status", "ok")
+        value = f"{r['mean']:.1f} ± {r['std']:.1f} {u}"
+        if st != "ok":  # a flagged figure never looks like a clean one
+            value = f"<s>{value}</s> <b style='color:{_STATUS_STYLE[st]}'>({_esc(st)})</b>"
+        row = (f"<tr><td>{_esc(name.replace('_', ' '))}</td><td>{value}</td>"
+               f"<td style='text-align:left'>{_status_html(st, r.get('flags', []))}</td>")
         if has_truth:
             row += pair(r["truth"], r["error"], u)
         if has_anny:
@@ -100,7 +132,8 @@ def write_report(source, *, max_overlay_frames: int = 6, extra: dict | None = No
     from rigs.atomic import atomic_write_text
     from rigs.imageio import read_image
     from studio.body import BodyModel
-    from studio.fit import OVERLAY_COLORS, load_fits
+    from studio.fit import OVERLAY_COLORS, load_fits, load_quality
+    from studio.fit.quality import summary_line
     from studio.report.measurements import load_truth, measurement_table, write_measurements
     from studio.report.views import body_views, png_base64
     from studio.workspace import Layout, Workspace
@@ -111,6 +144,7 @@ def write_report(source, *, max_overlay_frames: int = 6, extra: dict | None = No
     if not session_path.is_dir():
         raise FitError(f"{session_path}: no such session folder")
     fits = load_fits(lay)
+    qualities = load_quality(lay)
     genders = {f.gender for f in fits.values()}
     gender = sorted(genders)[0]
     model = BodyModel.load(gender)
@@ -136,7 +170,9 @@ def write_report(source, *, max_overlay_frames: int = 6, extra: dict | None = No
                 im = read_image(p)
                 imgs.append(f'<img src="{png_base64(im[::2, ::2])}" title="{_esc(cam)}" alt="{_esc(cam)}">')
         c = fits[f].costs
-        overlay_rows.append(f"<h3>frame {_esc(f)} — cost {c['total']:.2f}</h3><div class='row'>{''.join(imgs)}</div>")
+        q = fits[f].quality
+        overlay_rows.append(f"<h3>frame {_esc(f)} — cost {c['total']:.2f} — "
+                            f"{_status_html(fits[f].status, _reason_texts(q))}</h3><div class='row'>{''.join(imgs)}</div>")
     legend = " ".join(
         f"<span class='sw' style='background:rgb{tuple(int(v) for v in col)}'></span>{_esc(name)}"
         for name, col in OVERLAY_COLORS.items()
@@ -153,6 +189,11 @@ td,th{{border:1px solid #ccc;padding:3px 8px;text-align:right}} img{{margin:2px;
 model <b>{_esc(gender)}</b>{' (chosen by lower cost: ' + _esc(json.dumps(seq.get('gender_costs'))) + ')' if seq.get('gender_costs') else ''};
 mean fit time {timing:.1f} s per frame. Thesis ch. 4: annealed particle filter on the pose, staged Nelder–Mead on pose and shape,
 silhouette cost eq. 4.6 with coarse-to-fine pyramid levels.</p>
+<h2>Quality</h2>
+<p>{_esc(summary_line({f: q for f, q in qualities.items() if q.get('status') != 'unchecked'}) or 'no quality gates recorded (fitted before they existed)')}.
+A <b>suspect</b> or <b>failed</b> frame is left out of the measurements while clean frames exist; a figure resting on flagged frames,
+or implausible against ANSUR II, is struck through and marked.</p>
+{_quality_html(qualities)}
 <h2>Measurements</h2>
 <p>From the fitted shape of every frame (lengths in mm, rest pose; arm span in a T-pose).
 Spread = standard deviation over frames (thesis §4.8.6).{' Truth: the simulated person measured with the same definitions as the fit (and, where it differs, with the simulator’s Anny anthropometry).' if truth else ''}</p>

@@ -108,15 +108,50 @@ def test_cli_fit_then_report(tmp_path, capsys, monkeypatch):
     make_session(tmp_path / "s", n_frames=1)
     monkeypatch.setattr(fit_cmd, "QUICK", {k: v for k, v in TINY.to_dict().items() if k != "levels"})
     assert main(["fit", str(tmp_path / "s"), "--frames", "0", "--gender", "female", "--quick"]) == 0
-    assert "fitted 1 frame(s) with the female model" in capsys.readouterr().out
+    out = capsys.readouterr().out
+    assert "fitted 1 frame(s) with the female model" in out
+    status = json.loads((tmp_path / "s" / "fit" / "000000.json").read_text())["quality"]["status"]
+    assert f"quality: 1 {status}" in out
     assert main(["report", str(tmp_path / "s")]) == 0
     html = (tmp_path / "s" / "report" / "index.html").read_text()
     assert "Measurements" in html and "data:image/png;base64," in html and "model only" in html
+    assert "<h2>Quality</h2>" in html and f"1 {status}" in html
     table = json.loads((tmp_path / "s" / "report" / "measurements.json").read_text())["measurements"]
     assert 1400 < table["stature"]["mean"] < 2000 and table["stature"]["unit"] == "mm"
     csv = (tmp_path / "s" / "report" / "measurements.csv").read_text().splitlines()
-    assert csv[0].startswith("name,unit,mean,std,truth,error") and len(csv) == 10
+    assert csv[0].startswith("name,unit,mean,std,status,flags,truth,error") and len(csv) == 10
     assert main(["report", str(tmp_path / "absent")]) == 1
+
+
+def test_an_all_person_frame_is_refused_never_measured(tmp_path, capsys):
+    """Frame 0 (the would-be key frame) segmented as all person: it gets a failed record and no
+    body, frame 1 becomes the key frame, the report lists frame 0 as failed."""
+    from studio.fit import load_quality
+
+    make_session(tmp_path / "s", n_frames=2)
+    for c in ("cam0", "cam1", "cam2"):
+        p = tmp_path / "s" / "segmentation" / c / "000000.png"
+        write_image(p, np.ones((124, 164), np.uint8))
+    assert main(["fit", str(tmp_path / "s"), "--gender", "female", "--quick"]) == 0
+    out = capsys.readouterr().out
+    assert "frame 0 failed: cam0: the silhouette covers 100% of the image" in out
+    rec = json.loads((tmp_path / "s" / "fit" / "000000.json").read_text())
+    assert rec["fitted"] is False and "shape" not in rec and rec["quality"]["status"] == "failed"
+    assert not (tmp_path / "s" / "fit" / "000000.ply").exists()
+    assert sorted(load_fits(tmp_path / "s")) == [1]
+    q = load_quality(tmp_path / "s")
+    assert q[0]["status"] == "failed" and q[1]["status"] in ("ok", "suspect", "failed")
+    seq = json.loads((tmp_path / "s" / "fit" / "sequence.json").read_text())
+    assert seq["key_frame"] == 1 and seq["quality"]["0"] == "failed" and list(seq["costs"]) == ["1"]
+    assert main(["report", str(tmp_path / "s")]) == 0
+    html = (tmp_path / "s" / "report" / "index.html").read_text()
+    assert "covers 100% of the image" in html
+    # every frame refused: a clear error, the records still written
+    for c in ("cam0", "cam1", "cam2"):
+        write_image(tmp_path / "s" / "segmentation" / c / "000001.png", np.ones((124, 164), np.uint8))
+    with pytest.raises(FitError, match="no frame passed the segmentation checks"):
+        fit_session(tmp_path / "s", gender="female", options=TINY, force=True)
+    assert json.loads((tmp_path / "s" / "fit" / "000001.json").read_text())["fitted"] is False
 
 
 def test_rerun_keeps_frames_fitted_with_the_same_settings(tmp_path, monkeypatch):
@@ -166,6 +201,6 @@ def test_report_escapes_hostile_names(tmp_path):
     assert "&lt;img src=x onerror=alert(1)&gt;" in page
     assert page.count("<img ") >= 3  # the report's own pictures are still there
     rows = (hostile / "report" / "measurements.csv").read_text().splitlines()
-    assert rows[0].startswith("name,unit,mean,std,truth,error") and len(rows) > 5
+    assert rows[0].startswith("name,unit,mean,std,status,flags,truth,error") and len(rows) > 5
     table = json.loads((hostile / "report" / "measurements.json").read_text())["measurements"]
     assert 1000 < table["stature"]["mean"] < 2200 and table["stature"]["truth"] is None

@@ -159,7 +159,7 @@ def test_report_prefers_same_definition_truth_and_keeps_anny(female, walk, walk_
     assert table["arm_span"]["truth_anny"] is None and table["arm_span"]["error_anny"] is None
     _, csv_path = write_measurements(tmp_path, table)
     rows = csv_path.read_text().splitlines()
-    assert rows[0].startswith("name,unit,mean,std,truth,error,truth_anny,error_anny,frame_0,frame_4")
+    assert rows[0].startswith("name,unit,mean,std,status,flags,truth,error,truth_anny,error_anny,frame_0,frame_4")
     arm = next(r.split(",") for r in rows if r.startswith("arm_span"))
     assert arm[4] == f"{walk_truth['arm_span'] * 1000:.2f}" and arm[6] == arm[7] == ""
 

@@ -66,4 +66,5 @@ def run(args) -> int:
         print(f"{len(summary['kept'])} frame(s) already fitted with the same settings were kept (--force fits them again)")
     print(f"fitted {len(costs)} frame(s) with the {summary['gender']} model in {summary['wall_time']:.1f} s "
           f"(cost mean {sum(costs) / len(costs):.2f}); results in {ws.layout.fit_dir}")
+    print(f"quality: {summary['quality_summary']}")
     return 0

@@ -161,7 +161,7 @@ def test_report_prefers_same_definition_truth_and_keeps_anny(female, walk, walk_
     rows = csv_path.read_text().splitlines()
     assert rows[0].startswith("name,unit,mean,std,status,flags,truth,error,truth_anny,error_anny,frame_0,frame_4")
     arm = next(r.split(",") for r in rows if r.startswith("arm_span"))
-    assert arm[4] == f"{walk_truth['arm_span'] * 1000:.2f}" and arm[6] == arm[7] == ""
+    assert arm[4] == "ok" and arm[6] == f"{walk_truth['arm_span'] * 1000:.2f}" and arm[8] == arm[9] == ""
 
 
 def test_report_without_studio_truth_falls_back_to_anny(female, walk, tmp_path):

@@ -39,6 +39,7 @@ from studio.cost import SilhouetteTarget
 from studio.fit.errors import FitError, UnusableFrame
 from studio.body.inverse import shape_from_measurements
 from studio.fit.init import hull_centroid, hull_height, initial_poses
+from studio.fit.library import library_match, stand_on_floor
 from studio.fit.objective import CylinderObjective, FrameObjective, pose_bounds
 from studio.fit.quality import fit_quality, screen_masks
 from studio.optimize import Stage, annealed_particle_filter, staged_nelder_mead, thesis_stages
@@ -73,6 +74,9 @@ class FitOptions:
     partitioned passes and Nelder–Mead always score SCAPE. ``limb_particles`` × ``limb_layers``:
     the per-limb re-search after the middle-level Nelder–Mead (0 turns it off).
     ``rival_heading``: also search from the opposite heading when fitting from the silhouettes.
+    ``start``: how a frame fitted from its silhouettes starts — ``"library"`` (the lab posture
+    library matched to the silhouettes, :mod:`studio.fit.library`) or ``"stride"`` (12 headings
+    × standing / stride postures, :func:`studio.fit.init.initial_poses`).
 
     Frames fitted alone from the silhouettes (walk, frames 0/6/12/18/21): with the cone search,
     stride postures and the limb re-search the joint error was 17/13/29/29/21 mm; SCAPE search
@@ -99,10 +103,13 @@ class FitOptions:
     fit_shape: bool = True
     prior_weight: float = 1.0
     search_model: str = "cylinder"
+    start: str = "library"
 
     def __post_init__(self):
         if self.search_model not in ("scape", "cylinder"):
             raise FitError(f"search_model: expected 'scape' or 'cylinder', got {self.search_model!r}")
+        if self.start not in ("library", "stride"):
+            raise FitError(f"start: expected 'library' or 'stride', got {self.start!r}")
 
     def to_dict(self) -> dict:
         return {k: list(v) if isinstance(v, tuple) else v for k, v in asdict(self).items()}
@@ -277,11 +284,16 @@ def fit_frame(
     timings = {}
     init_height = None
     xy = hull_centroid(cameras, masks) if previous_pose is None or shape is None else None
+    match = None
+    if previous_pose is None and options.start == "library":
+        # the lab posture library matched to the silhouettes: postures, headings and stature
+        match = library_match(model, cameras, masks, xy, shape=shape)
     if shape is not None:
         base_shape = model.check_shape(shape)
     elif options.fit_shape and model.measurement_samples is not None:
-        # stature from the top of the visual hull → conditional-mean shape (§4.7.2-style init)
-        height = hull_height(cameras, masks, xy)
+        # stature → conditional-mean shape (§4.7.2-style init): from the library's best match,
+        # else from the top of the visual hull (wrong for a seated or arms-overhead person)
+        height = match["stature"] if match is not None else hull_height(cameras, masks, xy)
         base_shape = shape_from_measurements(model, {"stature": height}, refine=0)
         base_shape = np.clip(base_shape, -2.5 * np.sqrt(model.eigenvalues), 2.5 * np.sqrt(model.eigenvalues))
         init_height = height
@@ -300,9 +312,15 @@ def fit_frame(
 
     # -- initialisation + particle filter on the pose (shape held)
     t = time.perf_counter()
+    start_family = None
     if previous_pose is None:
         grid, _ = initial_poses(pose_obj, cameras, masks, search, keep=None, xy=xy)
         starts = grid[:4]
+        if match is not None:  # the library's shortlist, scored by the silhouette cost (eq. 4.6)
+            cand = stand_on_floor(model, base_shape, match["poses"])
+            X = np.stack([pose_obj.pack(base_shape, p) for p in cand])
+            order = np.argsort(pose_obj(X, search))[:4]
+            starts, start_family = X[order], match["families"][order[0]]
         if hint_pose is not None:
             hint = np.asarray(hint_pose, dtype=np.float64).copy()
             hint[:2] = starts[0, :2]
@@ -395,8 +413,10 @@ def fit_frame(
     if rival_cost is not None:
         costs["search_rival_heading"] = rival_cost
     costs["nelder_mead_refine"] = float(nm.cost)
+    if start_family is not None:
+        costs["start_family"] = start_family
     if init_height is not None:
-        costs["init_hull_height_m"] = init_height
+        costs["init_stature_m"] = init_height
     timings["total"] = time.perf_counter() - t_start
     log.info("frame %d (%s): cost %.3f in %.1f s", frame, model.gender, costs["total"], timings["total"])
     return FrameFit(

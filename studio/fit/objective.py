@@ -24,13 +24,14 @@ BATCH = 16
 
 def pose_bounds(model, root_xy: np.ndarray | None = None, xy_margin: float = 1.0) -> tuple[np.ndarray, np.ndarray]:
     """Bounds (lo, hi) of the pose vector: joint limits, translation within ``xy_margin`` of
-    ``root_xy`` and between -0.3 and 0.3 m in height (the body stands on the floor)."""
+    ``root_xy`` and between -0.6 and 0.3 m in height (the body stands on the floor; a seated or
+    squatting body drops its pelvis up to 0.6 m)."""
     lo = model.pose_limits[:, 0].astype(np.float64).copy()
     hi = model.pose_limits[:, 1].astype(np.float64).copy()
     if root_xy is not None:
         lo[:2] = np.asarray(root_xy, dtype=np.float64) - xy_margin
         hi[:2] = np.asarray(root_xy, dtype=np.float64) + xy_margin
-    lo[2], hi[2] = -0.3, 0.3
+    lo[2], hi[2] = -0.6, 0.3
     return lo, hi
 
 

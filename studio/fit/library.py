@@ -1,0 +1,211 @@
+"""A start that finds the limbs: a library of lab postures matched to the silhouettes (thesis §4.7.1).
+
+The thesis starts its search from a discriminative pose estimate. Ours is a nearest-neighbour
+search over a library of postures a lab records (:data:`FAMILIES`: A- and T-pose, arms
+overhead, hands on hips, one arm forward, arms crossed, wide stance, half squat, lunge, torso
+twist, walking and running strides, seated), each jittered and mirrored into
+:func:`pose_library` — deterministic for its seed, a few kilobytes, rebuilt by calling it
+(nothing is shipped that could go stale). The descriptor is the silhouettes themselves,
+through the session's own cameras, so the library needs no retraining for a new rig:
+
+1. every library posture is posed on the frame's starting shape (one batch of SCAPE meshes),
+   stood on the floor at the visual hull's floor centroid, and turned through ``n_headings``;
+2. a subsample of its vertices is projected into every view's silhouette pooled ``factor`` ×
+   (:func:`library_scores`): the share of points outside the silhouette (precision) plus the
+   share of silhouette cells no point reaches (recall), summed over the views — a few
+   million projections, no rendering;
+3. the best candidates are scored by the real silhouette cost (eq. 4.6) and handed to the
+   annealed particle filter as its starts.
+
+Posture angles are in the model's joint-angle pose (:mod:`studio.body.skeleton`): ball
+joints as rotation vectors in world axes (x flexion, y abduction, z twist; a downward limb
+moves forward for negative x, the torso bends forward for positive x), hinges as one angle
+(positive flexes). They are written from anatomy, not fitted to any benchmark person.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from studio.body.skeleton import JOINT_KIND, PART_NAMES, POSE_SIZE, pose_slices
+
+__all__ = ["FAMILIES", "SCALES", "family_pose", "library_match", "library_scores", "pose_library", "stand_on_floor"]
+
+_L, _R = "_l", "_r"
+
+#: Lab postures: part → angles (rad; 3 for ball joints, 1 for hinges), others at rest.
+FAMILIES: dict[str, dict[str, tuple[float, ...]]] = {
+    "a_pose": {},
+    "arms_down": {"upperarm_l": (0.0, 0.65, 0.0), "upperarm_r": (0.0, -0.65, 0.0)},
+    "t_pose": {"upperarm_l": (0.0, -0.8, 0.0), "upperarm_r": (0.0, 0.8, 0.0),
+               "lowerarm_l": (-0.7,), "lowerarm_r": (-0.7,)},
+    "arms_overhead": {"upperarm_l": (0.0, -2.25, 0.0), "upperarm_r": (0.0, 2.25, 0.0),
+                      "lowerarm_l": (-0.4,), "lowerarm_r": (-0.4,)},
+    "hands_on_hips": {"upperarm_l": (0.15, 0.1, 0.5), "upperarm_r": (0.15, -0.1, -0.5),
+                      "lowerarm_l": (1.3,), "lowerarm_r": (1.3,)},
+    "arm_forward": {"upperarm_l": (-1.45, 0.5, 0.0), "upperarm_r": (0.0, -0.6, 0.0), "lowerarm_l": (-0.5,)},
+    "arms_crossed": {"upperarm_l": (-0.35, 0.7, 0.4), "upperarm_r": (-0.35, -0.7, -0.4),
+                     "lowerarm_l": (1.5,), "lowerarm_r": (1.5,)},
+    "wide_stance": {"upperleg_l": (0.0, -0.35, 0.0), "upperleg_r": (0.0, 0.35, 0.0),
+                    "upperarm_l": (0.0, 0.4, 0.0), "upperarm_r": (0.0, -0.4, 0.0)},
+    "half_squat": {"upperleg_l": (-1.1, -0.15, 0.0), "upperleg_r": (-1.1, 0.15, 0.0),
+                   "lowerleg_l": (1.6,), "lowerleg_r": (1.6,), "foot_l": (-0.3,), "foot_r": (-0.3,),
+                   "torso": (0.45, 0.0, 0.0), "upperarm_l": (-1.2, 0.5, 0.0), "upperarm_r": (-1.2, -0.5, 0.0)},
+    "lunge": {"upperleg_l": (-1.1, 0.0, 0.0), "lowerleg_l": (1.2,), "upperleg_r": (0.45, 0.0, 0.0),
+              "lowerleg_r": (1.1,), "upperarm_l": (0.0, 0.55, 0.0), "upperarm_r": (0.0, -0.55, 0.0)},
+    "torso_twist": {"torso": (0.0, 0.0, 0.6), "upperarm_l": (0.0, 0.3, 0.0), "upperarm_r": (0.0, -0.3, 0.0)},
+    "walk": {"upperleg_l": (-0.38, 0.0, 0.0), "upperleg_r": (0.3, 0.0, 0.0), "lowerleg_r": (0.35,),
+             "upperarm_l": (0.3, 0.6, 0.0), "upperarm_r": (-0.3, -0.6, 0.0), "lowerarm_l": (-0.3,),
+             "lowerarm_r": (0.1,)},
+    "run": {"upperleg_l": (-0.8, 0.0, 0.0), "lowerleg_l": (0.6,), "upperleg_r": (0.45, 0.0, 0.0),
+            "lowerleg_r": (1.5,), "upperarm_l": (0.6, 0.6, 0.0), "upperarm_r": (-0.7, -0.6, 0.0),
+            "lowerarm_l": (0.9,), "lowerarm_r": (0.9,), "torso": (0.2, 0.0, 0.0)},
+    "seated": {"upperleg_l": (-1.5, -0.1, 0.0), "upperleg_r": (-1.5, 0.1, 0.0), "lowerleg_l": (1.5,),
+               "lowerleg_r": (1.5,), "upperarm_l": (-0.3, 0.6, 0.0), "upperarm_r": (-0.3, -0.6, 0.0),
+               "lowerarm_l": (0.9,), "lowerarm_r": (0.9,)},
+}
+
+_SLICES = pose_slices()
+_PART = {n: i for i, n in enumerate(PART_NAMES)}
+
+
+def family_pose(model, family: str) -> np.ndarray:
+    """(POSE_SIZE,) pose of ``family`` (root at the origin, heading 0), clipped to the limits."""
+    try:
+        angles = FAMILIES[family]
+    except KeyError:
+        raise ValueError(f"unknown posture family {family!r}; known: {', '.join(FAMILIES)}") from None
+    pose = model.default_pose()
+    for part, a in angles.items():
+        pose[_SLICES[_PART[part]]] = a
+    return model.clip_pose(pose)
+
+
+def _mirror(pose: np.ndarray) -> np.ndarray:
+    """The left-right mirror image of a pose (x → -x): swap the sides; ball joints keep their x
+    component and negate y and z; hinges and the root translation's y are kept."""
+    out = pose.copy()
+    for p, name in enumerate(PART_NAMES):
+        src = name[:-2] + (_R if name.endswith(_L) else _L) if name.endswith((_L, _R)) else name
+        a = pose[_SLICES[_PART[src]]].copy()
+        if JOINT_KIND[p] in ("ball", "root"):
+            a[1:] = -a[1:]
+        out[_SLICES[p]] = a
+    out[0] = -pose[0]
+    return out
+
+
+def pose_library(model, *, variants: int = 6, jitter: float = 0.15, seed: int = 0) -> tuple[np.ndarray, list[str]]:
+    """Library poses (N, POSE_SIZE) and their family names (N,): every family, its mirror
+    image, and ``variants`` - 1 jittered copies of each (Gaussian ``jitter`` rad on every joint
+    angle), clipped to the joint limits. Deterministic for ``seed``."""
+    rng = np.random.default_rng(seed)
+    poses, names = [], []
+    joints = np.arange(6, POSE_SIZE)
+    for family in FAMILIES:
+        base = family_pose(model, family)
+        for k in range(variants):
+            p = base.copy()
+            if k:
+                p[joints] += rng.normal(0.0, jitter, len(joints))
+            for q in (p, _mirror(p)):
+                poses.append(model.clip_pose(q))
+                names.append(family)
+    return np.asarray(poses), names
+
+
+def _pinhole(cam, factor: int):
+    """(K', R, t, (w', h')) of ``cam`` pooled ``factor`` × (no distortion: a coarse descriptor)."""
+    K = cam.K.astype(np.float64).copy()
+    K[:2] /= factor
+    w, h = cam.size
+    return K, cam.R.astype(np.float64), cam.t.astype(np.float64).ravel(), (-(-w // factor), -(-h // factor))
+
+
+def library_scores(points: np.ndarray, cameras, masks, yaws: np.ndarray, xy, *, factor: int = 8) -> np.ndarray:
+    """Descriptor distance (P, H) of every library body × heading to the observed silhouettes.
+
+    ``points`` (P, M, 3): vertex subsamples of the library bodies, standing on the floor,
+    their centroid over the origin; ``yaws`` (H,) headings (rad, about +z through the origin)
+    before the move to the floor point ``xy`` (the visual hull's centroid). Per view, with the mask pooled ``factor`` ×: the share
+    of points landing outside the silhouette plus the share of silhouette cells no point
+    lands in; summed over the views (0 = perfect, 2 × views = nothing in common).
+    """
+    P, M, _ = points.shape
+    H = len(yaws)
+    c, s = np.cos(yaws), np.sin(yaws)
+    Rz = np.zeros((H, 3, 3))
+    Rz[:, 0, 0], Rz[:, 0, 1], Rz[:, 1, 0], Rz[:, 1, 1], Rz[:, 2, 2] = c, -s, s, c, 1.0
+    world = np.einsum("hij,pmj->phmi", Rz, points) + np.array([xy[0], xy[1], 0.0])  # (P, H, M, 3)
+    world = world.reshape(-1, 3)
+    score = np.zeros(P * H)
+    for cam, mask in zip(cameras, masks, strict=True):
+        K, R, t, (wc, hc) = _pinhole(cam, factor)
+        coarse = np.zeros((hc, wc), dtype=bool)
+        ys, xs = np.nonzero(mask)
+        coarse[ys // factor, xs // factor] = True
+        cam_pts = world @ R.T + t
+        z = np.maximum(cam_pts[:, 2], 1e-6)
+        u = np.floor((K[0, 0] * cam_pts[:, 0] + K[0, 1] * cam_pts[:, 1]) / z + K[0, 2]).astype(np.int64)
+        v = np.floor(K[1, 1] * cam_pts[:, 1] / z + K[1, 2]).astype(np.int64)
+        ok = (cam_pts[:, 2] > 0) & (u >= 0) & (u < wc) & (v >= 0) & (v < hc)
+        cell = np.where(ok, v * wc + u, 0)
+        inside = ok & coarse.ravel()[cell]
+        score += 1.0 - inside.reshape(P * H, M).mean(axis=1)
+        # recall: silhouette cells reached by at least one point of the candidate
+        reached = np.zeros((P * H, wc * hc), dtype=bool)
+        reached[np.arange(P * H).repeat(M)[inside], cell[inside]] = True
+        score += 1.0 - reached.sum(axis=1) / max(int(coarse.sum()), 1)
+    return score.reshape(P, H)
+
+
+#: Statures searched with the library, as multiples of the model's mean stature (the hull's
+#: top is no stature for a seated, squatting or arms-overhead person).
+SCALES = (0.88, 0.94, 1.0, 1.06, 1.12)
+
+
+def library_match(model, cameras, masks, xy, *, shape=None, scales=SCALES, n_headings: int = 12,
+                  shortlist: int = 12, n_points: int = 400, factor: int = 8,
+                  library: tuple[np.ndarray, list[str]] | None = None) -> dict:
+    """The library postures best matching the silhouettes (:func:`library_scores`), searched
+    over posture × stature scale × heading with the bodies of ``shape`` (default: the mean).
+
+    Returns ``{"poses": (shortlist, POSE_SIZE) with the heading and the floor point set (root
+    height 0: see :func:`stand_on_floor`), "families", "scales", "scores", "stature"}`` best
+    first; ``stature`` (m) is the best candidate's scale × the library body's stature.
+    """
+    from calibration.rotation import matrix_to_rotvec, rotvec_to_matrix
+
+    poses, names = pose_library(model) if library is None else library
+    shape = model.mean_shape() if shape is None else np.asarray(shape, dtype=np.float64)
+    V = model.vertices_batch(np.repeat(shape[None], len(poses), axis=0), poses)
+    V[:, :, 2] -= V[:, :, 2].min(axis=1, keepdims=True)  # every posture on the floor
+    stature = float(V[names.index("a_pose"), :, 2].max()) if "a_pose" in names else float(V[:, :, 2].max())
+    sub = np.linspace(0, V.shape[1] - 1, n_points).astype(int)
+    scales = np.asarray(scales, dtype=np.float64)
+    pts = V[:, sub].copy()
+    pelvis = -pts[:, :, :2].mean(axis=1)  # the pelvis (origin) seen from the body's centroid
+    pts[:, :, :2] += pelvis[:, None]  # centroid over the origin, like the hull's centroid over xy
+    pts = (pts[:, None] * scales[None, :, None, None]).reshape(-1, n_points, 3)  # (P*S, M, 3)
+    yaws = np.linspace(-np.pi, np.pi, n_headings, endpoint=False)
+    scores = library_scores(pts, cameras, masks, yaws, xy, factor=factor)  # (P*S, H)
+    order = np.argsort(scores, axis=None)[:shortlist]
+    ps_idx, h_idx = np.unravel_index(order, scores.shape)
+    p_idx, s_idx = np.divmod(ps_idx, len(scales))
+    out = []
+    for p, s, h in zip(p_idx, s_idx, h_idx, strict=True):
+        pose = poses[p].copy()
+        Rz = rotvec_to_matrix(np.array([0.0, 0.0, yaws[h]]))
+        pose[3:6] = matrix_to_rotvec(Rz @ rotvec_to_matrix(pose[3:6]))  # turns about the pelvis
+        pose[:2] = np.asarray(xy) + (Rz[:2, :2] @ pelvis[p]) * scales[s]
+        out.append(pose)
+    return {"poses": np.asarray(out), "families": [names[p] for p in p_idx], "scales": scales[s_idx].tolist(),
+            "scores": scores[ps_idx, h_idx].tolist(), "stature": float(scales[s_idx[0]] * stature)}
+
+
+def stand_on_floor(model, shape, poses: np.ndarray) -> np.ndarray:
+    """``poses`` (N, POSE_SIZE) with the root height set so that the body of ``shape`` touches z = 0."""
+    poses = np.array(poses, dtype=np.float64)
+    V = model.vertices_batch(np.repeat(np.asarray(shape, dtype=np.float64)[None], len(poses), axis=0), poses)
+    poses[:, 2] -= V[:, :, 2].min(axis=1)
+    return poses

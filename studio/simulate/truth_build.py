@@ -44,7 +44,7 @@ from rigs.atomic import atomic_open
 from studio.body.anny_adapter import bone_part
 from studio.body.skeleton import PART_NAMES
 
-__all__ = ["SEQUENCES", "build_truth", "straight_t_pose", "PART_NAMES", "QUANT_SCALE"]
+__all__ = ["LAB_POSES", "SEQUENCES", "build_truth", "lab_pose", "straight_t_pose", "PART_NAMES", "QUANT_SCALE"]
 
 log = logging.getLogger(__name__)
 
@@ -110,6 +110,43 @@ STATIC_POSES: dict[str, dict[str, np.ndarray]] = {
                       "lowerarm01.L": _compose(_rot("z", 70.0), _rot("y", 60.0)),
                       "lowerarm01.R": _compose(_rot("z", -70.0), _rot("y", -60.0))},
 }
+
+def _arm(side: str, *rotvecs) -> dict[str, np.ndarray]:
+    return {f"upperarm01.{side}": _compose(*rotvecs)}
+
+
+#: Postures a lab records, in Anny's bones (degrees; written from anatomy and checked by eye,
+#: independently of the fitter's posture library ``studio.fit.library.FAMILIES``). Seated is
+#: left out: the simulator has no stool to sit on.
+LAB_POSES: dict[str, dict[str, np.ndarray]] = {
+    "a_pose": {},
+    "t_pose": STATIC_POSES["t_pose"],
+    "arms_overhead": {"upperarm01.L": _rot("y", -120.0), "upperarm01.R": _rot("y", 120.0),
+                      "lowerarm01.L": _rot("y", -10.0), "lowerarm01.R": _rot("y", 10.0)},
+    "hands_on_hips": STATIC_POSES["hands_on_hips"],
+    "arm_forward": {**_arms_down(30.0), **_arm("L", _rot("x", -80.0), _rot("y", 40.0))},
+    "arms_crossed": {**_arm("L", _rot("x", -35.0), _rot("y", 35.0)), **_arm("R", _rot("x", -35.0), _rot("y", -35.0)),
+                     "lowerarm01.L": _compose(_rot("z", -75.0), _rot("x", -20.0)),
+                     "lowerarm01.R": _compose(_rot("z", 75.0), _rot("x", -20.0))},
+    "wide_stance": {"upperleg01.L": _rot("y", -17.0), "upperleg01.R": _rot("y", 17.0), **_arms_down(22.0)},
+    "half_squat": {"upperleg01.L": _rot("x", -65.0), "upperleg01.R": _rot("x", -65.0),
+                   "lowerleg01.L": _rot("x", 95.0), "lowerleg01.R": _rot("x", 95.0), "spine03": _rot("x", 20.0),
+                   **_arm("L", _rot("x", -70.0), _rot("y", 40.0)), **_arm("R", _rot("x", -70.0), _rot("y", -40.0))},
+    "lunge": {"upperleg01.L": _rot("x", -60.0), "lowerleg01.L": _rot("x", 70.0), "upperleg01.R": _rot("x", 25.0),
+              "lowerleg01.R": _rot("x", 55.0), **_arms_down(30.0)},
+    "torso_twist": {"spine03": _rot("z", 28.0), "spine02": _rot("z", 10.0), **_arms_down(20.0)},
+    "walk": walk_pose(0.25)[0],
+    "run": {"upperleg01.L": _rot("x", -45.0), "lowerleg01.L": _rot("x", 30.0), "upperleg01.R": _rot("x", 28.0),
+            "lowerleg01.R": _rot("x", 85.0), **_arm("L", _rot("x", 35.0), _rot("y", 35.0)),
+            **_arm("R", _rot("x", -40.0), _rot("y", -35.0)),
+            "lowerarm01.L": _rot("x", -70.0), "lowerarm01.R": _rot("x", -70.0)},
+}
+
+
+def lab_pose(family: str, rng, jitter_deg: float = 7.0) -> dict[str, np.ndarray]:
+    """A jittered copy of ``LAB_POSES[family]`` (Gaussian ``jitter_deg`` on every bone's axis-angle)."""
+    return {b: np.asarray(v) + rng.normal(0.0, math.radians(jitter_deg), 3) for b, v in LAB_POSES[family].items()}
+
 
 #: Sequences built by :func:`build_truth`: name → recipe.
 SEQUENCES = {
@@ -273,16 +310,19 @@ def _to_world(V: np.ndarray, yaw: float, offset: np.ndarray) -> np.ndarray:
     return V @ Rz.T + offset
 
 
-def build_truth(out_dir: str | Path, names: list[str] | None = None, progress=None) -> list[Path]:
-    """Build ``<out_dir>/<name>/body.npz`` for the named sequences (default all).
+def build_truth(out_dir: str | Path, names: list[str] | None = None, progress=None,
+                sequences: dict | None = None) -> list[Path]:
+    """Build ``<out_dir>/<name>/body.npz`` for the named sequences (default all) of
+    ``sequences`` (default :data:`SEQUENCES`).
 
     Needs the ``model-build`` extra (torch + anny); the first model construction takes
     about a minute. ``ANNY_CACHE_DIR`` is honoured by anny.
     """
-    names = list(SEQUENCES) if names is None else list(names)
-    unknown = set(names) - set(SEQUENCES)
+    recipes = SEQUENCES if sequences is None else sequences
+    names = list(recipes) if names is None else list(names)
+    unknown = set(names) - set(recipes)
     if unknown:
-        raise ValueError(f"unknown sequence(s) {sorted(unknown)}; known: {sorted(SEQUENCES)}")
+        raise ValueError(f"unknown sequence(s) {sorted(unknown)}; known: {sorted(recipes)}")
     try:
         import anny  # noqa: F401
         import torch  # noqa: F401
@@ -300,13 +340,17 @@ def build_truth(out_dir: str | Path, names: list[str] | None = None, progress=No
     parts = part_of_bone[dominant]
     written = []
     for name in names:
-        recipe = SEQUENCES[name]
+        recipe = recipes[name]
         rng = np.random.default_rng(recipe["seed"])
         phen = _sample_phenotype(model, recipe["seed"], recipe["gender"], recipe["age_years"])
         if recipe["kind"] == "walk":
             T = recipe["frames"]
             poses, bobs = zip(*(walk_pose(i / T) for i in range(T)))
             pose_names = [f"walk_{i / T:.3f}" for i in range(T)]
+        elif recipe["kind"] == "lab":
+            poses = [lab_pose(f, rng) for f in recipe["poses"]]
+            bobs = [0.0] * len(poses)
+            pose_names = list(recipe["poses"])
         else:
             poses = [STATIC_POSES[p] for p in recipe["poses"]]
             bobs = [0.0] * len(poses)

@@ -2,11 +2,16 @@
 
 1. The observed silhouettes become a pyramid of :class:`~studio.cost.SilhouetteTarget`
    (coarse level for the search, full resolution for the end, §7.2.3).
-2. Without a previous pose, the root comes from the silhouettes (:mod:`studio.fit.init`):
-   floor position from the visual hull, then 12 headings × 3 postures (standing, mid-stride
-   with either leg forward) scored with SCAPE; the best 4 headings seed the filter. (With the
-   standing posture alone a walker in mid-stride scored best side-on: frame 6 of the walk
-   started 120° off.)
+0. The silhouettes are screened (:func:`studio.fit.quality.screen_masks`): a view with an
+   empty or all-image mask is left out, a frame with fewer than two usable views or views
+   the visual hull cannot reconcile is refused (:class:`~studio.fit.errors.UnusableFrame`).
+2. Without a previous pose, the start comes from the silhouettes: floor position from the
+   visual hull (:mod:`studio.fit.init`), then (``start="library"``, the default) the lab
+   posture library (:mod:`studio.fit.library`) matched over posture × stature × heading, its
+   shortlist scored with SCAPE, the best 4 seeding the filter; the match's stature starts
+   the shape. ``start="stride"`` (the first wave's start, kept for comparison): 12 headings ×
+   standing / stride postures, the stature from the hull's top — an arms-overhead person
+   started 339 mm (joint error) off and ended there, a squat 132 mm.
 3. The annealed particle filter (§4.7.3) searches the pose (shape held) at the coarse level on
    the 15-cone model of §4.8.1 (``search_model="cylinder"``, the default: ~3× cheaper per
    evaluation than SCAPE), started from the heading hypotheses (or from the previous frame's
@@ -15,13 +20,16 @@
    head, then each arm and each leg, the others held. Without a previous pose the same search
    runs again from the heading opposite its answer (facing the other way with the other leg
    forward fills nearly the same volume) and the lower SCAPE cost wins.
-   Without a given shape, the shape starts from the stature read off the top of the visual
-   hull (:func:`studio.fit.init.hull_height` → :func:`studio.body.shape_from_measurements`).
+   Without a given shape, the shape starts from the library's stature (or with
+   ``start="stride"`` the top of the visual hull, :func:`studio.fit.init.hull_height`) →
+   :func:`studio.body.shape_from_measurements`.
 4. Staged Nelder–Mead (§4.7.4, :func:`studio.optimize.thesis_stages`) refines root + shape,
    the limbs outward, then everything, at the middle level; each limb is then re-searched by a
    small partitioned particle filter (a forearm bent the wrong way is a minimum Nelder–Mead
    cannot leave); a last root + shape + trunk stage runs at full resolution. Joint limits
    are optimiser bounds, so they always hold.
+5. The quality gates (:func:`studio.fit.quality.fit_quality`) judge the result: ``quality``
+   in the result, status ``ok`` / ``suspect`` / ``failed`` with the reasons.
 """
 
 from __future__ import annotations

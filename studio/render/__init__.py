@@ -2,7 +2,7 @@
 
 The silhouette path (:func:`silhouette`, :func:`shadow_mask`) is numpy-only and exact;
 the fitter, which calls it thousands of times, uses :func:`silhouettes_contour` (fills the
-projected occluding contour row by row: same masks, ~1 ms per view); the colour path (:func:`rasterize` +
+projected occluding contour row by row, compiled with numba: same masks, ~0.5 ms per view); the colour path (:func:`rasterize` +
 :func:`shade_raster`) adds a z-buffer, barycentric interpolation and Lambertian shading.
 """
 

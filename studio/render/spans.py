@@ -193,38 +193,6 @@ def _topology(F: np.ndarray, n_vertices: int) -> _Topology | None:
     return topo
 
 
-def _winding_fill(p: np.ndarray, q: np.ndarray, size) -> np.ndarray:
-    """(H, W) bool pixels with a non-zero winding number of the directed segments p → q
-    (each (E, 2) pixel coordinates): a scanline fill with a difference image."""
-    w, h = size
-    out = np.zeros((h, w), dtype=bool)
-    py, qy = p[:, 1], q[:, 1]
-    up = qy > py
-    ylo = np.maximum(np.ceil(np.minimum(py, qy)), 0.0)
-    yhi = np.minimum(np.ceil(np.maximum(py, qy)) - 1.0, h - 1.0)  # rows y with lo <= y < hi
-    nrows = np.where(np.isfinite(ylo + yhi), np.maximum(yhi - ylo + 1.0, 0.0), 0.0).astype(np.int64)
-    total = int(nrows.sum())
-    if total == 0:
-        return out
-    e = np.repeat(np.arange(len(p)), nrows)
-    starts = np.cumsum(nrows) - nrows
-    y = ylo[e] + (np.arange(total) - starts[e])
-    x = p[e, 0] + (y - py[e]) * ((q[e, 0] - p[e, 0]) / (qy[e] - py[e]))
-    xi = np.clip(np.ceil(x), 0.0, w).astype(np.int64)
-    yi = y.astype(np.int64)
-    ya, yb = int(yi.min()), int(yi.max()) + 1
-    xa, xb = int(xi.min()), int(xi.max())
-    if xa >= w:
-        return out
-    ww = xb + 1 - xa  # right of the last crossing of a row its winding is back to 0
-    idx = (yi - ya) * ww + (xi - xa)
-    sgn = np.where(up[e], 1, -1)
-    diff = np.bincount(idx, weights=sgn, minlength=(yb - ya) * ww)
-    wind = np.cumsum(diff.reshape(yb - ya, ww), axis=1)[:, :-1]
-    out[ya:yb, xa:xb] = np.abs(wind) > 0.5
-    return out
-
-
 def silhouettes_contour(cameras, vertices: np.ndarray, faces: np.ndarray, *,
                         near: float = 1e-3) -> list[np.ndarray]:
     """Silhouettes (H_k, W_k) bool of a CLOSED, consistently wound mesh in each camera.
@@ -236,32 +204,25 @@ def silhouettes_contour(cameras, vertices: np.ndarray, faces: np.ndarray, *,
     by one scanline pass. The masks equal :func:`silhouettes_fast` / :func:`silhouette` up to
     pixel centres lying exactly on the contour. Meshes that are not closed and consistently
     wound, and cameras with a vertex closer than ``near``, fall back to :func:`silhouettes_fast`.
+    The per-view loops are compiled (:mod:`studio.render.winding`): 4 views of a 5,746-vertex
+    body at 328×246 take 2.3 ms instead of 4.1 ms with NumPy.
     """
+    from .winding import contour_edges, front_faces, winding_fill  # numba: imported on first use
+
     V, F = _check_mesh(vertices, faces)
     topo = _topology(F, len(V))
     if topo is None:
         return silhouettes_fast(cameras, V, F, near=near)
-    n, na, sign = face_normals(V, F)
     centres = np.stack([np.asarray(c.center, dtype=np.float64) for c in cameras], axis=1)
-    facing = (n @ centres - na[:, None]) * sign > 0  # (F, C)
+    facing = front_faces(V, F, centres)  # (F, C)
     out = []
     for k, cam in enumerate(cameras):
-        fk = facing[:, k]
-        a_front = fk[topo.f_uv]
-        b_front = fk[topo.f_vu]
-        sel = a_front != b_front
-        # direction of the contour edge as it runs in its front face
-        u = np.where(a_front[sel], topo.u[sel], topo.v[sel])
-        v = np.where(a_front[sel], topo.v[sel], topo.u[sel])
-        used = np.zeros(len(V), dtype=bool)
-        used[u] = True
-        used[v] = True
-        used = np.flatnonzero(used)
+        u, v, used = contour_edges(facing[:, k], topo.u, topo.v, topo.f_uv, topo.f_vu, len(V))
         uv_used, depth, _ = cam.project_points(V[used])
         if len(used) and depth.min() <= near:
             out.append(silhouettes_fast([cam], V, F, near=near)[0])
             continue
         uv = np.empty((len(V), 2))
         uv[used] = uv_used
-        out.append(_winding_fill(uv[u], uv[v], cam.size))
+        out.append(winding_fill(uv[u], uv[v], *cam.size))
     return out

@@ -37,7 +37,7 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
 FIRST_SEED = 1000  # held-out people: seeds from here up are only ever measured
-VARIANTS = {"full": {}, "no-library": {"start": "stride"}}
+VARIANTS = {"full": {}, "no-library": {"start": "stride"}, "no-rival": {"rival_heading": False}}
 STANDING = ("a_pose", "t_pose", "arms_overhead", "hands_on_hips", "arm_forward", "arms_crossed", "wide_stance",
             "torso_twist")
 
@@ -207,6 +207,8 @@ def summarise(rows: list[dict]) -> dict:
 
 
 def table(args) -> int:
+    from rigs.atomic import atomic_write_json
+
     results = {v: summarise(_rows(v)) for v in VARIANTS if _rows(v)}
     cols = ("frames", "surface_median_mm", "surface_p90_mm", "surface_worst_mm", "stature_error_median_mm",
             "joint_median_mm", "precision", "recall", "time_s", "ok_share")
@@ -224,8 +226,8 @@ def table(args) -> int:
     print("\nanchors: " + "; ".join(f"{k}: {v}" for k, v in anchors.items()))
     res = ROOT / "benchmarks" / "results" / "pose_accuracy.json"
     res.parent.mkdir(parents=True, exist_ok=True)
-    res.write_text(json.dumps({"benchmark": "pose_accuracy", "variants": results, "anchors": anchors,
-                               "standing_families": STANDING}, indent=2) + "\n")
+    atomic_write_json(res, {"benchmark": "pose_accuracy", "variants": results, "anchors": anchors,
+                            "standing_families": STANDING})
     print(f"wrote {res}")
     return 0
 

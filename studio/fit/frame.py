@@ -17,10 +17,9 @@
    evaluation than SCAPE), started from the heading hypotheses (or from the previous frame's
    pose with a smaller spread); SCAPE keeps the cone answer only if it beats the best start.
    Then a partitioned pass on SCAPE (Deutscher's partitioned APF) re-searches root + spine +
-   head, then each arm and each leg, the others held. With the stride start the same search
+   head, then each arm and each leg, the others held. Without a previous pose the same search
    runs again from the heading opposite its answer (facing the other way with the other leg
-   forward fills nearly the same volume) and the lower SCAPE cost wins; the library's
-   shortlist holds both headings already.
+   forward fills nearly the same volume) and the lower SCAPE cost wins.
    Without a given shape, the shape starts from the library's stature (or with
    ``start="stride"`` the top of the visual hull, :func:`studio.fit.init.hull_height`) →
    :func:`studio.body.shape_from_measurements`.
@@ -82,10 +81,12 @@ class FitOptions:
     model of §4.8.1 sized from the starting shape) or ``"scape"``; the heading search, the
     partitioned passes and Nelder–Mead always score SCAPE. ``limb_particles`` × ``limb_layers``:
     the per-limb re-search after the middle-level Nelder–Mead (0 turns it off).
-    ``rival_heading``: with ``start="stride"``, also search from the heading opposite the first
-    answer (the library's shortlist already holds both headings: on six lab postures the rival
-    search changed the joint error by −5…+2 mm and cost 6 s of the 36 s per frame, so the
-    library start does without it).
+    ``rival_heading``: also search from the opposite heading when fitting from the silhouettes.
+    Measured on the held-out pose benchmark (``benchmarks/pose_accuracy.py``, variant
+    ``no-rival``): without it a frame takes ~6 s less (of ~36 s), but walk frames went from
+    9.5 to 17.7 mm and runs from 10.2 to 13.1 mm median surface distance (a stride facing away
+    is the library's blind spot). Kept on: a six-posture dev set without strides had shown no
+    loss; the strides do.
     ``start``: how a frame fitted from its silhouettes starts — ``"library"`` (the lab posture
     library matched to the silhouettes, :mod:`studio.fit.library`) or ``"stride"`` (12 headings
     × standing / stride postures, :func:`studio.fit.init.initial_poses`).
@@ -370,7 +371,7 @@ def fit_frame(
 
     x_pose, c_pose, apf_cost = search_from(starts)
     rival_cost = None
-    if previous_pose is None and options.rival_heading and match is None:
+    if previous_pose is None and options.rival_heading:
         # the front/back rival: facing the other way with the other leg forward fills nearly the
         # same volume (a stride is almost symmetric under a half turn); search from the heading
         # opposite the answer and keep the lower SCAPE cost

@@ -49,7 +49,7 @@ from studio.body.inverse import shape_from_measurements
 from studio.fit.init import hull_centroid, hull_height, initial_poses
 from studio.fit.library import library_match, stand_on_floor
 from studio.fit.objective import CylinderObjective, FrameObjective, pose_bounds
-from studio.fit.quality import fit_quality, screen_masks
+from studio.fit.quality import fit_quality, refused_quality, screen_masks
 from studio.optimize import Stage, annealed_particle_filter, staged_nelder_mead, thesis_stages
 
 __all__ = ["FitOptions", "FrameFit", "fit_frame", "fit_frame_gender"]
@@ -287,9 +287,7 @@ def fit_frame(
             raise FitError(f"camera {c.name}: mask is {m.shape[1]}x{m.shape[0]}, calibration says {c.size[0]}x{c.size[1]}")
     screen = screen_masks(cameras, masks) if screen is None else screen
     if screen["status"] == "failed":
-        raise UnusableFrame(frame, {"version": 1, "status": "failed", "reasons": screen["reasons"],
-                                    "views": screen["views"], "dropped_views": screen["dropped"],
-                                    "segmentation_status": "failed"})
+        raise UnusableFrame(frame, refused_quality(screen))
     used = [i for i, c in enumerate(cameras) if c.name not in screen["dropped"]]
     cameras, masks = [cameras[i] for i in used], [masks[i] for i in used]
     rng = np.random.default_rng(seed)

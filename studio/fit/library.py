@@ -28,6 +28,7 @@ from __future__ import annotations
 import numpy as np
 
 from studio.body.skeleton import JOINT_KIND, PART_NAMES, POSE_SIZE, pose_slices
+from studio.fit.quality import pool_any
 
 __all__ = ["FAMILIES", "SCALES", "family_pose", "library_match", "library_scores", "pose_library", "stand_on_floor"]
 
@@ -141,9 +142,7 @@ def library_scores(points: np.ndarray, cameras, masks, yaws: np.ndarray, xy, *, 
     score = np.zeros(P * H)
     for cam, mask in zip(cameras, masks, strict=True):
         K, R, t, (wc, hc) = _pinhole(cam, factor)
-        coarse = np.zeros((hc, wc), dtype=bool)
-        ys, xs = np.nonzero(mask)
-        coarse[ys // factor, xs // factor] = True
+        coarse = pool_any(mask, factor)
         cam_pts = world @ R.T + t
         z = np.maximum(cam_pts[:, 2], 1e-6)
         u = np.floor((K[0, 0] * cam_pts[:, 0] + K[0, 1] * cam_pts[:, 1]) / z + K[0, 2]).astype(np.int64)

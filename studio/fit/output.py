@@ -74,14 +74,15 @@ def write_frame_fit(layout, fit, model, cameras, masks, images=None, run: dict |
     return atomic_write_json(layout.fit_json(fit.frame), obj)
 
 
-def write_unfitted(layout, error, run: dict | None = None) -> Path:
+def write_unfitted(layout, error, run: dict | None = None) -> dict:
     """Write ``fit/NNNNNN.json`` of a frame the quality gates refused to fit
     (:class:`~studio.fit.errors.UnusableFrame` ``error``): its ``quality`` object (status
-    ``failed``, the reasons) and no body, so no figure is ever read off it."""
+    ``failed``, the reasons) and no body, so no figure is ever read off it. Returns what it wrote."""
     from rigs.atomic import atomic_write_json
 
     layout.fit_dir.mkdir(parents=True, exist_ok=True)
     obj = {"format": "studio.fit", "version": 1, "frame": error.frame, "fitted": False, "quality": error.quality}
     if run is not None:
         obj["run"] = run
-    return atomic_write_json(layout.fit_json(error.frame), obj)
+    atomic_write_json(layout.fit_json(error.frame), obj)
+    return obj

@@ -39,7 +39,9 @@ __all__ = [
     "Reason",
     "fit_quality",
     "population",
+    "pool_any",
     "population_z",
+    "refused_quality",
     "screen_masks",
     "status_of",
     "summarise_ansur",
@@ -147,6 +149,15 @@ def population_z(measurements: dict, gender: str) -> dict[str, float]:
 
 
 # --------------------------------------------------------------------------- segmentation
+def pool_any(mask: np.ndarray, factor: int) -> np.ndarray:
+    """(ceil(H / factor), ceil(W / factor)) bool: cells holding any pixel of ``mask``."""
+    h, w = mask.shape
+    out = np.zeros((-(-h // factor), -(-w // factor)), dtype=bool)
+    ys, xs = np.nonzero(mask)
+    out[ys // factor, xs // factor] = True
+    return out
+
+
 def _blobs(mask: np.ndarray) -> list[int]:
     import cv2
 
@@ -173,10 +184,7 @@ def _hull_explained(cameras, masks, *, step: float = 0.03, factor: int = 4) -> l
     out = []
     for cam, mask in zip(cameras, masks, strict=True):
         h, w = mask.shape
-        hc, wc = -(-h // factor), -(-w // factor)
-        coarse = np.zeros((hc, wc), dtype=bool)
-        ys, xs = np.nonzero(mask)
-        coarse[ys // factor, xs // factor] = True
+        coarse = pool_any(mask, factor)
         hit = np.zeros_like(coarse)
         if len(hull):
             uv, _, front = cam.project_points(hull)
@@ -255,6 +263,12 @@ def screen_masks(cameras, masks) -> dict:
     return {"views": views, "reasons": out, "status": status_of(out), "dropped": dropped}
 
 
+def refused_quality(screen: dict) -> dict:
+    """The ``quality`` object of a frame the screen refused (status ``failed``): no body."""
+    return {"version": QUALITY_VERSION, "status": "failed", "reasons": screen["reasons"], "views": screen["views"],
+            "dropped_views": screen["dropped"], "segmentation_status": "failed"}
+
+
 # --------------------------------------------------------------------------- the fitted frame
 def fit_quality(model, cameras, masks, shape, pose, costs: dict, screen: dict | None = None,
                 measurements: dict | None = None) -> dict:
@@ -262,47 +276,43 @@ def fit_quality(model, cameras, masks, shape, pose, costs: dict, screen: dict | 
     with the observed ``masks``, cost per view, shape σ, population z-scores, the segmentation
     ``screen`` (:func:`screen_masks`, computed when None), ``reasons`` and ``status``."""
     from studio.body import measure
+    from studio.fit.evaluate import silhouette_agreement
     from studio.render import silhouette
 
     screen = screen_masks(cameras, masks) if screen is None else screen
-    reasons = [dict(r) for r in screen["reasons"]]
+    reasons: list[Reason] = []
     V = model.vertices(shape, pose)
-    inter = n_model = n_obs = 0
+    sils = [silhouette(cam, V, model.faces) for cam in cameras]
     per_view = {}
-    for cam, obs in zip(cameras, masks, strict=True):
-        sil = silhouette(cam, V, model.faces)
-        i, nm, no = (int(np.count_nonzero(a)) for a in (sil & obs, sil, obs))
-        inter, n_model, n_obs = inter + i, n_model + nm, n_obs + no
-        p, r = i / max(nm, 1), i / max(no, 1)
+    for cam, sil, obs in zip(cameras, sils, masks, strict=True):
+        p, r = silhouette_agreement([sil], [obs])
         per_view[cam.name] = {"precision": round(p, 4), "recall": round(r, 4),
                               "cost": round(float(costs.get("silhouette_per_view", {}).get(cam.name, np.nan)), 4)}
         if min(p, r) < VIEW_AGREEMENT:
-            reasons.append({"check": "view_agreement", "severity": "suspect", "view": cam.name,
-                            "message": f"the fitted body matches this view poorly (precision {p:.2f}, recall {r:.2f})"})
-    precision, recall = inter / max(n_model, 1), inter / max(n_obs, 1)
+            reasons.append(Reason("view_agreement", "suspect", f"the fitted body matches this view poorly "
+                                  f"(precision {p:.2f}, recall {r:.2f})", cam.name))
+    precision, recall = silhouette_agreement(sils, masks)
     worst = min(precision, recall)
     sev = "failed" if worst < AGREEMENT[1] else "suspect" if worst < AGREEMENT[0] else None
     if sev:
-        reasons.append({"check": "agreement", "severity": sev, "view": None,
-                        "message": f"the fitted body explains the silhouettes poorly (precision {precision:.2f}, "
-                                   f"recall {recall:.2f}; {AGREEMENT[0]:.2f} expected)"})
+        reasons.append(Reason("agreement", sev, f"the fitted body explains the silhouettes poorly (precision "
+                              f"{precision:.2f}, recall {recall:.2f}; {AGREEMENT[0]:.2f} expected)"))
     sigma = np.sqrt(np.asarray(model.eigenvalues, dtype=np.float64))
     s = np.asarray(shape, dtype=np.float64) / sigma
     max_sigma = float(np.max(np.abs(s)))
     if max_sigma >= SHAPE_BOUND_SIGMA:
         k = int(np.argmax(np.abs(s)))
-        reasons.append({"check": "shape_prior", "severity": "suspect", "view": None,
-                        "message": f"shape coefficient {k} at {s[k]:+.1f} σ, the bound of the model: "
-                                   "it could not explain this person"})
+        reasons.append(Reason("shape_prior", "suspect", f"shape coefficient {k} at {s[k]:+.1f} σ, the bound of "
+                              "the model: it could not explain this person"))
     meas = measure(model, shape) if measurements is None else measurements
     z = population_z(meas, model.gender)
     for name, v in z.items():
         sev = "failed" if abs(v) > POPULATION_Z[1] else "suspect" if abs(v) > POPULATION_Z[0] else None
         if sev:
             unit, scale = ("kg", 1.0) if name == "mass" else ("mm", 1000.0)
-            reasons.append({"check": "population", "severity": sev, "view": None,
-                            "message": f"{name.replace('_', ' ')} {scale * meas[name]:.0f} {unit} is {v:+.1f} σ "
-                                       f"from ANSUR II ({model.gender}): implausible"})
+            reasons.append(Reason("population", sev, f"{name.replace('_', ' ')} {scale * meas[name]:.0f} {unit} is "
+                                  f"{v:+.1f} σ from ANSUR II ({model.gender}): implausible"))
+    reasons = [dict(r) for r in screen["reasons"]] + [r.to_json() for r in reasons]
     return {
         "version": QUALITY_VERSION,
         "status": status_of(reasons),
@@ -321,12 +331,12 @@ def fit_quality(model, cameras, masks, shape, pose, costs: dict, screen: dict | 
 def summary_line(qualities: dict) -> str:
     """One line over ``{frame: quality}``: counts by status and the flagged frames with their
     first reason, e.g. ``"22 ok, 1 suspect, 1 failed — frame 7 failed: ..."``."""
-    counts = {s: 0 for s in ("ok", "suspect", "failed")}
+    counts = {s: 0 for s in ("ok", "suspect", "failed", "unchecked")}
     flagged = []
     for f in sorted(qualities):
         q = qualities[f]
         counts[q["status"]] += 1
-        if q["status"] != "ok":
+        if q["status"] in ("suspect", "failed"):
             r = q["reasons"][0]
             flagged.append(f"frame {f} {q['status']}: {(r['view'] + ': ') if r.get('view') else ''}{r['message']}")
     head = ", ".join(f"{n} {s}" for s, n in counts.items() if n)

@@ -90,20 +90,17 @@ def _fit_chunk(job: dict) -> list[dict]:
     out = []
     for frame in job["frames"]:
         masks = _masks(ws, frame)
-        screen = screen_masks(cameras, masks)
-        if screen["status"] == "failed":
-            err = UnusableFrame(frame, {"version": 1, "status": "failed", "reasons": screen["reasons"],
-                                        "views": screen["views"], "dropped_views": screen["dropped"],
-                                        "segmentation_status": "failed"})
-            log.warning("%s", err)
-            write_unfitted(ws.layout, err, run=job["run"])
-            out.append(json.loads(ws.layout.fit_json(frame).read_text()))
-            continue
+        screen = screen_masks(cameras, masks)  # once for both fits below
         track = prev is not None and abs(frame - prev_frame) <= MAX_TRACK_GAP
         hint = prev if prev is not None else job.get("hint_pose")
-        fit = fit_frame(model, cameras, masks, frame=frame, shape=shape,
-                        previous_pose=prev if track else None, hint_pose=None if track else hint,
-                        options=options, seed=job["seed"] + frame, screen=screen)
+        try:
+            fit = fit_frame(model, cameras, masks, frame=frame, shape=shape,
+                            previous_pose=prev if track else None, hint_pose=None if track else hint,
+                            options=options, seed=job["seed"] + frame, screen=screen)
+        except UnusableFrame as err:
+            log.warning("%s", err)
+            out.append(write_unfitted(ws.layout, err, run=job["run"]))
+            continue
         if track and fit.costs["total"] > RECOVERY_FACTOR * job["key_cost"]:
             # tracking lost the body: search again from the silhouettes, keep the better fit
             log.info("frame %d: tracking cost %.2f, re-initialising from the silhouettes", frame, fit.costs["total"])
@@ -188,8 +185,7 @@ def fit_session(
             key_fit = fit_frame_gender(cameras, masks, gender, frame=key, options=options, seed=seed + key)
         except UnusableFrame as err:
             log.warning("%s", err)
-            write_unfitted(ws.layout, err, run=run)
-            results[key] = json.loads(ws.layout.fit_json(key).read_text())
+            results[key] = write_unfitted(ws.layout, err, run=run)
             if progress:
                 progress(len(results), total)
             continue
@@ -249,7 +245,7 @@ def fit_session(
 
 
 def _qualities(results: dict) -> dict:
-    return {f: r.get("quality") or {"status": "ok", "reasons": []} for f, r in results.items()}
+    return {f: r.get("quality") or {"status": "unchecked", "reasons": []} for f, r in results.items()}
 
 
 def load_quality(source, frames: list[int] | None = None) -> dict[int, dict]:

@@ -8,26 +8,15 @@ import pytest
 
 from calibration import Camera
 from calibration.rotation import rotvec_to_matrix
-from studio.body import BodyModel
 from studio.fit import FitError, fit_frame
 from studio.fit.errors import UnusableFrame
 from studio.fit.quality import (POPULATION_FILE, fit_quality, population, population_z, screen_masks, status_of,
                                 summarise_ansur, summary_line)
 from studio.render import silhouette
 
-from test_fit_frame import SMALL, ring_cameras, true_body
+from test_fit_frame import SMALL, scene  # noqa: F401 (scene: a fixture)
 
 ANSUR = Path(__file__).resolve().parents[3] / "shared" / "data" / "anthropometry" / "ansur2"
-
-
-@pytest.fixture(scope="module")
-def scene():
-    model = BodyModel.load("female")
-    cams = ring_cameras()
-    shape, pose = true_body(model)
-    V = model.vertices(shape, pose)
-    masks = [silhouette(c, V, model.faces) for c in cams]
-    return model, cams, shape, pose, V, masks
 
 
 def _checks(result, severity=None):
@@ -71,24 +60,25 @@ def test_one_bad_view_is_dropped_and_flagged(scene):
     assert all(s["views"][c]["hull_explained"] >= 0.95 for c in ("cam0", "cam1", "cam3"))
 
 
+def _turned(cams, k, degrees):
+    """``cams`` with camera ``k`` turned ``degrees`` about its own vertical (y) axis, centre kept."""
+    c = cams[k]
+    R = rotvec_to_matrix(np.radians(degrees) * np.array([0.0, 1.0, 0.0])) @ c.R
+    wrong = list(cams)
+    wrong[k] = Camera(c.name, c.K, c.dist, R, -R @ (-c.R.T @ c.t), c.size)
+    return wrong
+
+
 def test_a_camera_rotated_10_degrees_fails(scene):
     model, cams, shape, pose, V, masks = scene
-    c = cams[1]
-    R = rotvec_to_matrix(np.radians(10.0) * np.array([0.0, 1.0, 0.0])) @ c.R
-    wrong = list(cams)
-    wrong[1] = Camera(c.name, c.K, c.dist, R, -R @ (-c.R.T @ c.t), c.size)
-    s = screen_masks(wrong, masks)
+    s = screen_masks(_turned(cams, 1, 10.0), masks)
     assert s["status"] == "failed" and "hull" in _checks(s, "failed")
 
 
 def test_a_camera_panned_3_degrees_is_flagged(scene):
     """3° of pan moves the image ~15 px sideways: the other views carve the hull away."""
     model, cams, shape, pose, V, masks = scene
-    c = cams[3]
-    R = rotvec_to_matrix(np.radians(3.0) * np.array([0.0, 1.0, 0.0])) @ c.R
-    wrong = list(cams)
-    wrong[3] = Camera(c.name, c.K, c.dist, R, -R @ (-c.R.T @ c.t), c.size)
-    s = screen_masks(wrong, masks)
+    s = screen_masks(_turned(cams, 3, 3.0), masks)
     assert s["status"] != "ok" and "hull" in _checks(s)
     assert min(v["hull_explained"] for v in s["views"].values()) < 0.8
 

@@ -11,27 +11,12 @@ from __future__ import annotations
 
 import numpy as np
 
+from studio.render.solids import cylinder_mesh
+
 __all__ = ["STOOL_RADIUS", "stool_mesh", "stool_under"]
 
 #: Radius of the stool's seat (m).
 STOOL_RADIUS = 0.17
-
-
-def _cylinder(cx: float, cy: float, z0: float, z1: float, r: float, sides: int) -> tuple[np.ndarray, np.ndarray]:
-    """A closed cylinder (vertices (2 sides + 2, 3), faces wound counter-clockwise seen from outside)."""
-    a = np.linspace(0.0, 2 * np.pi, sides, endpoint=False)
-    ring = np.stack([cx + r * np.cos(a), cy + r * np.sin(a)], axis=1)
-    V = np.concatenate([np.column_stack([ring, np.full(sides, z0)]), np.column_stack([ring, np.full(sides, z1)]),
-                        [[cx, cy, z0], [cx, cy, z1]]])
-    i = np.arange(sides)
-    j = (i + 1) % sides
-    bottom, top = 2 * sides, 2 * sides + 1
-    F = np.concatenate([
-        np.stack([i, j, sides + j], axis=1), np.stack([i, sides + j, sides + i], axis=1),  # side
-        np.stack([np.full(sides, top), sides + i, sides + j], axis=1),  # top, normal +z
-        np.stack([np.full(sides, bottom), j, i], axis=1),  # bottom, normal -z
-    ])
-    return V, F
 
 
 def stool_mesh(x: float, y: float, top: float, radius: float = STOOL_RADIUS,
@@ -40,8 +25,8 @@ def stool_mesh(x: float, y: float, top: float, radius: float = STOOL_RADIUS,
     a 4 cm seat of ``radius``, a 3.5 cm column and a 2 cm base of 0.7 × ``radius``."""
     if not top > 0.1:
         raise ValueError(f"stool: the seat's top must be above 0.1 m, got {top}")
-    parts = [_cylinder(x, y, top - 0.04, top, radius, sides), _cylinder(x, y, 0.02, top - 0.04, 0.035, sides),
-             _cylinder(x, y, 0.0, 0.02, 0.7 * radius, sides)]
+    parts = [cylinder_mesh(x, y, top - 0.04, top, radius, sides), cylinder_mesh(x, y, 0.02, top - 0.04, 0.035, sides),
+             cylinder_mesh(x, y, 0.0, 0.02, 0.7 * radius, sides)]
     V = np.concatenate([p[0] for p in parts])
     offsets = np.cumsum([0] + [len(p[0]) for p in parts[:-1]])
     F = np.concatenate([p[1] + o for p, o in zip(parts, offsets, strict=True)])

@@ -195,6 +195,24 @@ def _scores(points, yaws, xy, Ks, Rs, ts, sizes, offsets, coarse, n_cells):  # p
 SCALES = (0.88, 0.94, 1.0, 1.06, 1.12)
 
 
+#: Library bodies by (gender, shape, points): every frame fitted from its silhouettes with the
+#: same starting shape poses the same 168 meshes (~1 s), so a worker poses them once.
+_BODIES: dict = {}
+
+
+def _library_bodies(model, shape, library, n_points: int):
+    """(poses, names, points (P, M, 3) standing on the floor with their centroid over the
+    origin, the pelvis seen from the centroid (P, 2), the a-pose stature) of a library."""
+    poses, names = library
+    V = model.vertices_batch(np.repeat(shape[None], len(poses), axis=0), poses)
+    V[:, :, 2] -= V[:, :, 2].min(axis=1, keepdims=True)  # every posture on the floor
+    stature = float(V[names.index("a_pose"), :, 2].max()) if "a_pose" in names else float(V[:, :, 2].max())
+    pts = V[:, np.linspace(0, V.shape[1] - 1, n_points).astype(int)]
+    pelvis = -pts[:, :, :2].mean(axis=1)  # the pelvis (origin) seen from the body's centroid
+    pts[:, :, :2] += pelvis[:, None]  # centroid over the origin, like the hull's centroid over xy
+    return poses, names, pts, pelvis, stature
+
+
 def library_match(model, cameras, masks, xy, *, shape=None, scales=SCALES, n_headings: int = 12,
                   shortlist: int = 12, n_points: int = 400, factor: int = 8,
                   library: tuple[np.ndarray, list[str]] | None = None) -> dict:
@@ -207,16 +225,17 @@ def library_match(model, cameras, masks, xy, *, shape=None, scales=SCALES, n_hea
     """
     from calibration.rotation import matrix_to_rotvec, rotvec_to_matrix
 
-    poses, names = pose_library(model) if library is None else library
     shape = model.mean_shape() if shape is None else np.asarray(shape, dtype=np.float64)
-    V = model.vertices_batch(np.repeat(shape[None], len(poses), axis=0), poses)
-    V[:, :, 2] -= V[:, :, 2].min(axis=1, keepdims=True)  # every posture on the floor
-    stature = float(V[names.index("a_pose"), :, 2].max()) if "a_pose" in names else float(V[:, :, 2].max())
-    sub = np.linspace(0, V.shape[1] - 1, n_points).astype(int)
+    if library is not None:
+        poses, names, pts, pelvis, stature = _library_bodies(model, shape, library, n_points)
+    else:
+        key = (model.gender, shape.tobytes(), n_points)
+        if key not in _BODIES:
+            if len(_BODIES) > 4:
+                _BODIES.clear()
+            _BODIES[key] = _library_bodies(model, shape, pose_library(model), n_points)
+        poses, names, pts, pelvis, stature = _BODIES[key]
     scales = np.asarray(scales, dtype=np.float64)
-    pts = V[:, sub].copy()
-    pelvis = -pts[:, :, :2].mean(axis=1)  # the pelvis (origin) seen from the body's centroid
-    pts[:, :, :2] += pelvis[:, None]  # centroid over the origin, like the hull's centroid over xy
     pts = (pts[:, None] * scales[None, :, None, None]).reshape(-1, n_points, 3)  # (P*S, M, 3)
     yaws = np.linspace(-np.pi, np.pi, n_headings, endpoint=False)
     scores = library_scores(pts, cameras, masks, yaws, xy, factor=factor)  # (P*S, H)

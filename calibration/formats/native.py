@@ -78,7 +78,7 @@ def rig_from_dict(doc: dict, path: str | PathLike = "<dict>"):
             if not isinstance(g, dict) or "normal" not in g or "offset" not in g:
                 raise CalibrationError("expected {normal, offset}", field="ground")
             ground = GroundPlane(g["normal"], g["offset"])
-        return RigParts(cameras, ground, doc.get("metadata") or {})
+        return RigParts(cameras, ground, doc.get("metadata") or {}, units="m", units_fixed=True, own_frame=True)
     except CalibrationError as exc:
         raise exc.in_file(path) from None
 

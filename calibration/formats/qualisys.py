@@ -113,4 +113,5 @@ def read_qualisys(path: str | PathLike):
     except CalibrationError as exc:
         raise exc.in_file(path) from None
     meta = {"source": "qualisys", "avg_residual": residuals}
-    return RigParts(cameras, GroundPlane.floor(), meta)
+    return RigParts(cameras, GroundPlane.floor(), meta, units="m", units_fixed=True,
+                    notes=("Qualisys camera centres are in mm by the format: converted to metres on reading",))

@@ -146,7 +146,8 @@ def flip_world(cameras, ground: GroundPlane, toward_cameras: bool):
 
 
 def _range(h: np.ndarray) -> str:
-    return f"{h.min():.2f} to {h.max():.2f} m" if len(h) > 1 else f"{h[0]:.2f} m"
+    lo, hi = f"{h.min():.2f}", f"{h.max():.2f}"
+    return f"{lo} m" if lo == hi else f"{lo} to {hi} m"
 
 
 def _settle_up(cameras, ground, own_frame: bool, z_down: str | None, source: str):

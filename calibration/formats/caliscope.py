@@ -31,6 +31,8 @@ import tomli_w
 from calibration.camera import Camera
 from calibration.errors import CalibrationError
 from calibration.formats import RigParts
+from calibration.formats.text import read_document
+from calibration.formats.toml_calib import camera_table
 from calibration.ground import GroundPlane
 from calibration.rotation import nearest_rotation
 from rigs.atomic import atomic_write_text
@@ -38,18 +40,6 @@ from rigs.atomic import atomic_write_text
 NEEDED = ("matrix", "distortions", "rotation", "translation", "size")
 #: Largest ``max |R Rᵀ - I|`` of a legacy 3x3 rotation put down to rounding.
 ROUNDING_TOL = 1e-4
-
-
-def _load(path: Path) -> dict:
-    try:
-        with open(path, "rb") as f:
-            return tomllib.load(f)
-    except OSError as exc:
-        raise CalibrationError(f"cannot read ({exc.strerror})", file=path) from None
-    except UnicodeDecodeError as exc:
-        raise CalibrationError(f"not UTF-8 text (byte {exc.start}): expected a UTF-8 TOML file", file=path) from None
-    except (tomllib.TOMLDecodeError, RecursionError) as exc:
-        raise CalibrationError(f"not valid TOML ({exc})", file=path) from None
 
 
 def _tables(doc: dict, path: Path) -> dict[str, dict]:
@@ -82,7 +72,7 @@ def _rotation(value, name: str) -> np.ndarray:
 
 def read_caliscope(path) -> RigParts:
     path = Path(path)
-    doc = _load(path)
+    doc = read_document(path, tomllib.loads, "TOML", (tomllib.TOMLDecodeError,))
     cameras, skipped, turned = {}, [], []
     try:
         for port, table in _tables(doc, path).items():
@@ -129,16 +119,5 @@ def write_caliscope(rig, path) -> Path:
     tables = {}
     for i, (name, cam) in enumerate(rig.cameras.items()):
         port = int(name) if numeric else i
-        tables[str(port)] = {
-            "port": port,
-            "name": name,
-            "size": [int(cam.width), int(cam.height)],
-            "matrix": cam.K.tolist(),
-            "distortions": cam.dist.tolist(),
-            "rotation": cam.rvec.tolist(),
-            "translation": cam.t.tolist(),
-            "fisheye": cam.model == "fisheye",
-            "rotation_count": 0,
-            "ignore": False,
-        }
+        tables[str(port)] = {"port": port, **camera_table(name, cam), "rotation_count": 0, "ignore": False}
     return atomic_write_text(path, tomli_w.dumps({"cameras": tables}), mkdir=True)

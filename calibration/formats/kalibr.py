@@ -26,6 +26,7 @@ import yaml
 from calibration.camera import Camera
 from calibration.errors import CalibrationError
 from calibration.formats import RigParts
+from calibration.formats.text import read_document
 from calibration.ground import GroundPlane
 from calibration.rotation import nearest_rotation
 from rigs.atomic import atomic_write_text
@@ -36,18 +37,12 @@ WORLD_KEY = "T_cam_world"
 ROUNDING_TOL = 1e-4
 
 
+def _yaml(text: str):
+    return yaml.safe_load("\n".join(ln for ln in text.splitlines() if not ln.startswith("%YAML")))
+
+
 def _load(path: Path) -> dict:
-    try:
-        text = path.read_text(encoding="utf-8")
-    except OSError as exc:
-        raise CalibrationError(f"cannot read ({exc.strerror})", file=path) from None
-    except UnicodeDecodeError as exc:
-        raise CalibrationError(f"not UTF-8 text (byte {exc.start})", file=path) from None
-    lines = [ln for ln in text.splitlines() if not ln.startswith("%YAML")]
-    try:
-        doc = yaml.safe_load("\n".join(lines))
-    except yaml.YAMLError as exc:
-        raise CalibrationError(f"not valid YAML ({exc})".replace("\n", " "), file=path) from None
+    doc = read_document(path, _yaml, "YAML", (yaml.YAMLError,))
     if not isinstance(doc, dict):
         raise CalibrationError("expected a mapping of cam0, cam1, ...", file=path)
     return doc

@@ -25,6 +25,7 @@ import numpy as np
 from calibration.camera import Camera
 from calibration.errors import CalibrationError
 from calibration.formats import RigParts
+from calibration.formats.text import read_document
 from calibration.ground import GroundPlane
 from calibration.rotation import nearest_rotation
 from rigs.atomic import atomic_write_text
@@ -34,14 +35,7 @@ ROUNDING_TOL = 1e-4
 
 
 def _load(path: Path) -> dict:
-    try:
-        doc = json.loads(path.read_text(encoding="utf-8"))
-    except OSError as exc:
-        raise CalibrationError(f"cannot read ({exc.strerror})", file=path) from None
-    except UnicodeDecodeError as exc:
-        raise CalibrationError(f"not UTF-8 text (byte {exc.start})", file=path) from None
-    except (json.JSONDecodeError, RecursionError) as exc:
-        raise CalibrationError(f"not valid JSON ({exc})", file=path) from None
+    doc = read_document(path, json.loads, "JSON", (json.JSONDecodeError,))
     if not isinstance(doc, dict) or not isinstance(doc.get("cameras"), dict) or not doc["cameras"]:
         raise CalibrationError("expected an object with a non-empty 'cameras' table", file=path, field="cameras")
     return doc

@@ -32,7 +32,7 @@ import numpy as np
 from calibration.camera import Camera
 from calibration.errors import CalibrationError
 from calibration.formats import RigParts
-from calibration.formats.qualisys import _float
+from calibration.formats.text import attr_float as _float, child as _child
 from calibration.ground import GroundPlane
 from calibration.rotation import nearest_rotation
 
@@ -42,13 +42,6 @@ FLIP = np.diag([1.0, -1.0, -1.0])
 Y_UP_TO_Z_UP = np.array([[1.0, 0.0, 0.0], [0.0, 0.0, -1.0], [0.0, 1.0, 0.0]])
 #: Largest ``max |M Mᵀ - I|`` of ``OrientMatrix`` put down to rounding.
 ROUNDING_TOL = 1e-4
-
-
-def _child(elem, tag: str, cam: str):
-    child = elem.find(tag)
-    if child is None:
-        raise CalibrationError("missing", camera=cam, field=tag)
-    return child
 
 
 def _camera(elem) -> Camera:

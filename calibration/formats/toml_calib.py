@@ -124,18 +124,22 @@ def read_toml(path: str | PathLike):
         raise exc.in_file(path) from None
 
 
+def camera_table(name: str, cam) -> dict:
+    """A camera as the anipose-style table (also Caliscope's): name, size, matrix,
+    distortions, rotation (Rodrigues), translation, fisheye."""
+    return {
+        "name": name,
+        "size": [int(cam.width), int(cam.height)],
+        "matrix": cam.K.tolist(),
+        "distortions": cam.dist.tolist(),
+        "rotation": cam.rvec.tolist(),
+        "translation": cam.t.tolist(),
+        "fisheye": cam.model == "fisheye",
+    }
+
+
 def rig_to_toml_doc(rig) -> dict:
-    doc: dict = {}
-    for name, cam in rig.cameras.items():
-        doc[name] = {
-            "name": name,
-            "size": [int(cam.width), int(cam.height)],
-            "matrix": cam.K.tolist(),
-            "distortions": cam.dist.tolist(),
-            "rotation": cam.rvec.tolist(),
-            "translation": cam.t.tolist(),
-            "fisheye": cam.model == "fisheye",
-        }
+    doc: dict = {name: camera_table(name, cam) for name, cam in rig.cameras.items()}
     meta = {"adjusted": False, "error": 0.0}
     meta.update(rig.metadata)
     meta[GROUND_KEY] = rig.ground.to_dict()

@@ -26,7 +26,6 @@
 
 from __future__ import annotations
 
-import xml.etree.ElementTree as ET
 from pathlib import Path
 
 import numpy as np
@@ -34,7 +33,7 @@ import numpy as np
 from calibration.camera import Camera
 from calibration.errors import CalibrationError
 from calibration.formats import RigParts
-from calibration.formats.qualisys import _float
+from calibration.formats.text import attr_float as _float, parse_xml
 from calibration.ground import GroundPlane
 from calibration.rotation import quaternion_to_matrix
 
@@ -121,12 +120,7 @@ def _camera(elem) -> tuple[Camera, float]:
 
 def read_vicon(path) -> RigParts:
     path = Path(path)
-    try:
-        root = ET.parse(path).getroot()
-    except OSError as exc:
-        raise CalibrationError(f"cannot read ({exc.strerror})", file=path) from None
-    except ET.ParseError as exc:
-        raise CalibrationError(f"not valid XML ({exc})", file=path) from None
+    root = parse_xml(path)
     cameras, worst, errors = {}, 0.0, {}
     try:
         for elem in root.iter("Camera"):

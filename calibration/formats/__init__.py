@@ -186,7 +186,10 @@ def detect_format(path: str | PathLike, for_writing: bool = False) -> str:
     if name in ("cameras.txt", "cameras.bin", "images.txt", "images.bin"):
         return "colmap"
     if name.endswith(".xml"):
-        found = _sniff_xml(head) if reading else "opencv_camera"
+        if for_writing:
+            raise CalibrationError("per-camera OpenCV files are written as a folder of <camera>/config.xml: "
+                                   "give a folder name and the format opencv_camera", file=path)
+        found = _sniff_xml(head)
         if found:
             return found
     elif reading:

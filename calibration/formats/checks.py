@@ -107,7 +107,7 @@ def _settle_units(parts, units: str | None) -> tuple[dict, GroundPlane, list[str
                          f"kept {unit}; pass units={detected!r} (--units {detected}) if the file is not as documented")
     elif detected is not None:
         unit = detected
-        word = f"; the format's usual unit is {parts.units}" if parts.units in UNIT_SCALE else ""
+        word = f"; expected {parts.units}" if parts.units in UNIT_SCALE else ""
         notes.append(f"units: {unit} (detected: {shown}{word})")
     else:
         unit = parts.units if parts.units in UNIT_SCALE else "m"

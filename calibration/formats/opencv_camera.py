@@ -25,7 +25,8 @@ Sources: a folder of ``<camera>/config.xml`` (camera names from the folder names
 (camera named after its folder for ``config.xml``/``intrinsics.xml``, else after the file), or
 ``{name: file}`` pairs. The image size, which the course files lack, is read from a video or
 image beside the file when there is one (``video.avi`` …), else guessed from the principal
-point with a warning.
+point with a warning. A course ``checkerboard.xml`` beside the camera folders
+(``CheckerBoardSquareSize``) says which unit to expect; the magnitudes still decide.
 """
 
 from __future__ import annotations
@@ -192,8 +193,26 @@ def read_opencv_camera(path) -> RigParts:
                     break
         if not pairs:
             raise CalibrationError("no <camera>/config.xml sub-folders", file=path)
-        return read_camera_pairs(pairs)
+        return _board_hint(read_camera_pairs(pairs), path / "checkerboard.xml")
     return read_camera_pairs({_name_of(path): path})
+
+
+def _board_hint(parts: RigParts, board: Path) -> RigParts:
+    """The course's ``checkerboard.xml`` beside the camera folders gives the board's square size
+    in the translations' unit: a size over 5 cannot be metres, so the usual unit is mm."""
+    if not board.is_file():
+        return parts
+    fs = _open_storage(board)
+    try:
+        node = fs.getNode("CheckerBoardSquareSize")
+        size = node.real() if not node.empty() and (node.isReal() or node.isInt()) else None
+    finally:
+        fs.release()
+    if size is None or size <= 0:
+        return parts
+    unit = "mm" if size > 5 else "m"
+    return parts._replace(units=unit, notes=parts.notes + (
+        f"{board.name}: board squares of {size:g} in the translations' unit, so {unit} is expected",))
 
 
 def write_opencv_camera(rig, path) -> Path:

@@ -51,7 +51,8 @@ def test_uu_config_folder_matches_the_raw_xml(shared_data):
         np.testing.assert_allclose(cam.center, F @ (-R_file.T @ T) / 1000.0, atol=1e-9)
         assert cam.size == (644, 486)  # from the videos beside the files
         assert 1.5 < cam.center[2] < 2.2  # cameras above the floor now
-    assert any(n.startswith("units: mm (detected: camera centres spread over 8195 file units") for n in rig.notes)
+    assert "units: mm (detected: camera centres spread over 8195 file units; expected mm)" in rig.notes
+    assert "checkerboard.xml: board squares of 115 in the translations' unit, so mm is expected" in rig.notes
     assert any("the file's world had Z pointing down (cameras 1.65 to 2.11 m below the floor" in n for n in rig.notes)
     with pytest.raises(CalibrationError, match=r"uu_infomcv_4cam_person: field 'up axis': the world's Z axis points down "
                                                r"\(all cameras 1\.65 to 2\.11 m below the floor"):

@@ -7,8 +7,8 @@ board's size, as anipose does) and whether the world frame is the toolkit's own
 (``own_frame``: files this toolkit wrote, carrying their ground plane). :func:`settle` then
 
 1. **units**: detects millimetres vs metres from the spread of the camera centres
-   (:func:`detect_units`: ≥ ``MM_ABOVE`` → mm, ≤ ``M_BELOW`` → m, in between the format's
-   word); a ``units`` argument overrides; translations (and the ground offset) are scaled to
+   (:func:`detect_units`: ≥ ``MM_ABOVE`` → mm, ≤ ``M_BELOW`` → m, in between the unit the
+   reader expects, with a warning); a ``units`` argument overrides; translations (and the ground offset) are scaled to
    metres. Where the format fixes the units and the magnitudes disagree, a warning says so.
 2. **up axis**: the cameras must stand above the floor (``n·C > d`` for the ground plane
    ``n·X = d``, default z = 0). When every camera is below it the world's Z points down:
@@ -18,7 +18,8 @@ board's size, as anipose does) and whether the world frame is the toolkit's own
    ``z_down="keep"``. The toolkit's own files are never changed (the check only reports).
    When some cameras sit on the floor plane or on both sides of it (a world anchored on a
    camera, as Kalibr, anipose and Caliscope write), the up axis is reported as not verified.
-
+   Cameras above the floor with a ground normal pointing down get the normal reversed
+   (foreign files) or a warning (own files).
 3. **facing**: with three cameras or more, at least half must look towards the others
    (:func:`facing_count`); fewer is reported as a warning about the rotation convention.
 

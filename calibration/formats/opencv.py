@@ -122,6 +122,11 @@ def _open(path: Path):
 def _names(fs, path: Path) -> list[str]:
     node = fs.getNode("names")
     if node.empty() or node.isNone():
+        single = next((k for k in ("camera_matrix", "CameraMatrix") if not fs.getNode(k).empty()), None)
+        if single:
+            raise CalibrationError(f"missing: this is a single-camera OpenCV file ({single}), not EasyMocap's "
+                                   "intri.yml: read it as format opencv_camera (load_any detects it)",
+                                   file=path, field="names")
         raise CalibrationError("missing", file=path, field="names")
     names = []
     for i in range(node.size()):

@@ -150,3 +150,10 @@ def test_per_camera_errors(tmp_path, capsys):
     assert "x.xml: no such file (camera 'a')" in capsys.readouterr().err
     assert main(["convert", "junk", "a=b=c", str(tmp_path / "o.json")]) == 1
     assert "junk: expected NAME=FILE when several inputs are given" in capsys.readouterr().err
+
+
+def test_easymocap_reader_points_a_single_camera_file_elsewhere(shared_data):
+    path = shared_data / "calibration/opencv_chessboard_9x6/left_intrinsics.REFERENCE.yml"
+    with pytest.raises(CalibrationError, match=r"REFERENCE\.yml: field 'names': missing: this is a single-camera "
+                                               r"OpenCV file \(camera_matrix\), not EasyMocap's intri\.yml"):
+        RigCalibration.from_opencv(path, path)

@@ -59,7 +59,7 @@ def _output_format(path, explicit: str | None) -> str:
 
     if path.suffix == "" and not path.exists():
         raise CommandError(
-            f"{path}: cannot tell the output format of a new folder; pass --to opencv or --to colmap"
+            f"{path}: cannot tell the output format of a new folder; pass --to opencv, opencv_camera or colmap"
         )
     try:
         return detect_format(path, for_writing=True)

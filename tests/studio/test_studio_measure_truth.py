@@ -12,7 +12,7 @@ import pytest
 from studio.body import BodyModel, measure
 from studio.body.iso7250 import ISO_NAMES
 from studio.body.measure import MEASUREMENT_NAMES, measure_anny_body, measure_mesh, place_canonical, t_pose
-from studio.report.measurements import REPORTED, measurement_table, write_measurements
+from studio.report.measurements import REPORTED, UNITS, measurement_table, write_measurements
 from studio.simulate.session import studio_truth
 
 ROOT = Path(__file__).resolve().parents[2] / "studio" / "samples"
@@ -150,7 +150,7 @@ def test_report_prefers_same_definition_truth_and_keeps_anny(female, walk, walk_
     table = measurement_table(female, fits, dict(anny, studio=walk_truth))
     for name in REPORTED:
         r = table[name]
-        scale = 1.0 if name == "mass" else 1000.0
+        scale = UNITS[name][1]
         assert r["truth_source"] == "studio"
         assert r["truth"] == pytest.approx(walk_truth[name] * scale)
         assert r["error"] == pytest.approx(r["mean"] - r["truth"])
@@ -160,7 +160,8 @@ def test_report_prefers_same_definition_truth_and_keeps_anny(female, walk, walk_
     assert table["arm_span"]["truth_anny"] is None and table["arm_span"]["error_anny"] is None
     _, csv_path = write_measurements(tmp_path, table)
     rows = csv_path.read_text().splitlines()
-    assert rows[0].startswith("name,unit,mean,std,status,flags,truth,error,truth_anny,error_anny,frame_0,frame_4")
+    assert rows[0].startswith("name,unit,mean,std,status,flags,truth,error,truth_anny,error_anny,clause,sigma,")
+    assert rows[0].endswith(",frame_0,frame_4")
     arm = next(r.split(",") for r in rows if r.startswith("arm_span"))
     assert arm[4] == "ok" and arm[6] == f"{walk_truth['arm_span'] * 1000:.2f}" and arm[8] == arm[9] == ""
 

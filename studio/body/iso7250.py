@@ -24,10 +24,11 @@ for every person, fitted or true:
   within 60 mm of the elbow joint;
 - ``stylion_l/_r``: wrist, the forearm vertex farthest along the forearm's axis;
 - ``thelion_l/_r``: most anterior point of the chest 50–130 mm lateral of the midline;
-- ``tibiale_l/_r``: medial point of the knee at the knee joint's height.
+- ``tibiale_l/_r``: medial point of the knee at the knee joint's height;
+- ``crotch``: lowest point of the pelvis and thighs within 15 mm of the sagittal plane,
+  between the knees and the shoulders.
 
-Levels and planes: the crotch is the lowest trunk point within 15 mm of the sagittal plane;
-girths are perimeters of the convex hull of a plane section (a tape bridges concavities,
+Girths are perimeters of the convex hull of a plane section (a tape bridges concavities,
 thesis §6.4.4) of the named body parts only.
 
 All functions take metres, return metres (kg for mass, kg/m² for BMI).
@@ -92,7 +93,7 @@ DEFINITIONS: tuple[Definition, ...] = (
        "vertical distance from the floor to the bottom of the elbow with the upper arm hanging: "
        "shoulder height minus shoulder-elbow length"),
     _D("crotch_height", "Crotch height", "ISO 7250-1 4.1.7", "height", "m", "crotchheight",
-       "vertical distance from the floor to the crotch (lowest trunk point in the sagittal plane)"),
+       "vertical distance from the floor to the crotch landmark (lowest trunk point in the sagittal plane)"),
     _D("knee_height", "Knee (tibial) height", "ISO 7250-1 4.1.8", "height", "m", "tibialheight",
        "vertical distance from the floor to the tibiale (medial knee at the knee joint), mean of both sides"),
     _D("chest_depth", "Chest depth", "ISO 7250-1 4.1.9", "depth", "m", "chestdepth",
@@ -197,6 +198,11 @@ def _landmark_rules(v: np.ndarray, parts: np.ndarray, J: np.ndarray) -> dict[str
     out = {}
     head = idx[parts == _P["head"]]
     out["vertex"] = int(head[np.argmax(v[head, 2])])
+    sh_z = float(0.5 * (J[_P["upperarm_l"], 2] + J[_P["upperarm_r"], 2]))
+    knee_z = float(0.5 * (J[_P["lowerleg_l"], 2] + J[_P["lowerleg_r"], 2]))
+    mid = idx[(np.abs(v[:, 0]) < 0.015) & (v[:, 2] > knee_z) & (v[:, 2] < sh_z)
+              & np.isin(parts, [_P["pelvis"], _P["upperleg_l"], _P["upperleg_r"]])]
+    out["crotch"] = int(mid[np.argmin(v[mid, 2])])
     nose = head[np.argmin(v[head, 1])]
     front = head[v[head, 1] < v[head, 1].min() + 0.06]
     for side, sign in (("l", 1.0), ("r", -1.0)):
@@ -274,22 +280,12 @@ def measure_iso(vertices, tpose_vertices, joints, faces, parts, face_parts, *, d
         lines[f"elbow_wrist_length_{s}"] = np.stack([pt[f"olecranon_{s}"], pt[f"stylion_{s}"]])
     lines["biacromial_breadth"] = np.stack([pt["acromion_l"], pt["acromion_r"]])
 
-    # crotch: lowest trunk / thigh point near the sagittal plane, above the knees
-    sh_z = float(0.5 * (J[_P["upperarm_l"], 2] + J[_P["upperarm_r"], 2]))
     hip_z = float(0.5 * (J[_P["upperleg_l"], 2] + J[_P["upperleg_r"], 2]))
-    knee_z = float(0.5 * (J[_P["lowerleg_l"], 2] + J[_P["lowerleg_r"], 2]))
-    mid = (np.abs(v[:, 0]) < 0.015) & (v[:, 2] > knee_z) & (v[:, 2] < sh_z)
-    mid &= np.isin(parts, [_P["pelvis"], _P["upperleg_l"], _P["upperleg_r"]])
-    if np.any(mid):
-        c = np.flatnonzero(mid)[np.argmin(v[mid, 2])]
-        pt["crotch"] = v[c]
-        crotch_z = float(v[c, 2])
-    else:
-        crotch_z = float("nan")
+    crotch_z = float(pt["crotch"][2])
     vals["crotch_height"] = crotch_z - floor
 
     hips = np.isin(parts, [_P["pelvis"], _P["upperleg_l"], _P["upperleg_r"]]) & (v[:, 2] < hip_z + 0.05)
-    hips &= v[:, 2] > (crotch_z if np.isfinite(crotch_z) else hip_z - 0.15)
+    hips &= v[:, 2] > crotch_z
     if np.any(hips):
         il, ir = np.flatnonzero(hips)[[np.argmax(v[hips, 0]), np.argmin(v[hips, 0])]]
         vals["hip_breadth"] = float(v[il, 0] - v[ir, 0])
@@ -323,7 +319,7 @@ def measure_iso(vertices, tpose_vertices, joints, faces, parts, face_parts, *, d
         lines[f"thigh_circumference_{s}"] = ring
         return per
 
-    vals["thigh_circumference"] = mean_sides(thigh) if np.isfinite(crotch_z) else float("nan")
+    vals["thigh_circumference"] = mean_sides(thigh)
 
     def upper_arm(s):
         a, o = pt[f"acromion_{s}"], pt[f"olecranon_{s}"]

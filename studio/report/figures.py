@@ -67,5 +67,9 @@ def frames_figure(fits: dict, qualities: dict):
     a2.set_ylabel("share of silhouette pixels")
     a2.set_ylim(min(0.7, *(qualities[f]["silhouette_precision"] for f in qf)) if qf else 0.7, 1.0)
     a2.grid(alpha=0.3)
+    from matplotlib.ticker import MaxNLocator
+
+    for ax in (a1, a2):
+        ax.xaxis.set_major_locator(MaxNLocator(integer=True))
     fig.tight_layout()
     return fig

@@ -52,9 +52,11 @@ def write_pdf(data, path: str | Path) -> Path:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
     from matplotlib.backends.backend_pdf import PdfPages
+    from matplotlib.patches import Patch
 
     from rigs.atomic import atomic_write_bytes
     from rigs.imageio import read_image
+    from studio.fit import OVERLAY_COLORS
     from studio.fit.quality import summary_line
     from studio.report.figures import frames_figure, uncertainty_figure
     from studio.report.views import body_views
@@ -122,6 +124,9 @@ def write_pdf(data, path: str | Path) -> Path:
                 ax.set_title(f"frame {f}, {cam}", fontsize=8)
             for ax in axes.ravel():
                 ax.axis("off")
+            fig.suptitle(f"Overlays of frame {f} at full resolution", fontsize=10)
+            fig.legend(handles=[Patch(facecolor=np.asarray(c) / 255.0, edgecolor="#888", label=n)
+                                for n, c in OVERLAY_COLORS.items()], loc="lower center", ncol=3, fontsize=8)
             pdf.savefig(fig)
             plt.close(fig)
     return atomic_write_bytes(path, buf.getvalue(), mkdir=True)

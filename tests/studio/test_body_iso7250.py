@@ -74,12 +74,14 @@ def test_each_measurement_on_bodies_made_analytic(body):
     v[L["acromion_l"], 2] = v[L["acromion_r"], 2] = 1.40
     v[L["exocanthion_l"], 2], v[L["exocanthion_r"], 2] = 1.51, 1.53
     v[L["tibiale_l"], 2] = v[L["tibiale_r"], 2] = 0.47
+    v[L["crotch"], 2] = v[L["crotch"], 2] - 0.01
     v[L["acromion_l"], 0], v[L["acromion_r"], 0] = 0.18, -0.19
     v[L["acromion_l"], 1] = v[L["acromion_r"], 1] = 0.0
     got = _measure(m, v, vt, J).values
     assert got["shoulder_height"] == pytest.approx(1.40, abs=1e-9)
     assert got["eye_height"] == pytest.approx(1.52, abs=1e-9)
     assert got["knee_height"] == pytest.approx(0.47, abs=1e-9)
+    assert got["crotch_height"] == pytest.approx(base["crotch_height"] - 0.01, abs=1e-9)
     assert got["biacromial_breadth"] == pytest.approx(0.37, abs=1e-9)
     assert got["stature"] == pytest.approx(base["stature"], abs=1e-9)
     assert got["elbow_height"] == pytest.approx(1.40 - got["shoulder_elbow_length"], abs=1e-9)

@@ -196,3 +196,49 @@ def test_exports_reload(session, capsys):
         load_parameters(bad)
     with pytest.raises(ValueError, match="not a TRC file"):
         read_trc(bad)
+
+
+def test_bad_inputs_are_named(tmp_path, capsys):
+    from studio.body.parameters import load_parameters
+    from studio.fit import FitError
+    from studio.report.data import gather
+    from studio.report.exports import export_session
+    from studio.report.measurements import frames_used
+
+    with pytest.raises(ValueError, match="participant notes: expected text"):
+        Participant("a", notes=3)
+    with pytest.raises(FileNotFoundError, match="ANSUR_II_FEMALE_Public.csv: ANSUR II CSV not found"):
+        summarise_percentiles(tmp_path)
+    (tmp_path / "ANSUR_II_FEMALE_Public.csv").write_text("stature,weightkg\n1600,600\n")
+    with pytest.raises(ValueError, match="FEMALE_Public.csv: no column 'acromialheight'"):
+        summarise_percentiles(tmp_path)
+    (tmp_path / "ANSUR_II_FEMALE_Public.csv").write_text("stature,weightkg\ntall,600\n")
+    with pytest.raises(ValueError, match="FEMALE_Public.csv: column 'stature': could not convert"):
+        summarise_percentiles(tmp_path)
+    p = tmp_path / "p.json"
+    p.write_text("{")
+    with pytest.raises(ValueError, match="not a readable JSON file"):
+        load_parameters(p)
+    p.write_text(json.dumps({"format": "other"}))
+    with pytest.raises(ValueError, match="expected format 'studio.body-parameters' version 1"):
+        load_parameters(p)
+    p.write_text(json.dumps({"format": "studio.body-parameters", "version": 1, "gender": "robot"}))
+    with pytest.raises(ValueError, match="field 'gender': expected one of"):
+        load_parameters(p)
+    shape = [0.0] * BodyModel.load("female").n_shape
+    p.write_text(json.dumps({"format": "studio.body-parameters", "version": 1, "gender": "female", "shape": shape,
+                             "frames": {"3": []}}))
+    with pytest.raises(ValueError, match="field 'frames.3': expected an object"):
+        load_parameters(p)
+    trc = tmp_path / "bad.trc"
+    trc.write_text("PathFileType\t4\n\n1\t1\t5\t15\n\n\n\n1\t0\t1\n")
+    with pytest.raises(ValueError, match="header says 5 frames of 15 markers"):
+        read_trc(trc)
+    with pytest.raises(ValueError, match="export kind"):
+        export_session(tmp_path, ("stl",))
+    with pytest.raises(ValueError, match="no fitted frames"):
+        frames_used({})
+    with pytest.raises(FitError, match="no such session folder"):
+        gather(tmp_path / "absent")
+    assert main(["report", str(tmp_path), "--age", "-4"]) == 1
+    assert "participant age" in capsys.readouterr().err

@@ -9,6 +9,7 @@ then one page of overlays per shown frame.
 from __future__ import annotations
 
 import io
+import textwrap
 from pathlib import Path
 
 import numpy as np
@@ -32,15 +33,15 @@ def _measurement_rows(table: dict) -> tuple[list[str], list[list[str]], list[str
         d = 2 if r["unit"] == "kg/m²" else 1
         st = r.get("status", "ok")
         value = f"{r['mean']:.{d}f} {r['unit']}"
-        if st != "ok":
-            value = f"({st}) {value}"
+        if st != "ok":  # never printed clean: marked, and the row shaded
+            value = f"⚠ {value}"
         ci = r.get("ci95") or [np.nan, np.nan]
         ok = r.get("iso20685_ok")
         iso = "–" if ok is None else f"{r['iso20685_max_error']:.0f} mm: {'yes' if ok else 'NO'}"
         pop = r.get("population")
         rows.append([r.get("title", ""), value, f"{ci[0]:.{d}f} – {ci[1]:.{d}f}", iso,
                      "–" if pop is None else f"{pop['text']} ({pop['z']:+.1f})",
-                     st + ("" if st == "ok" else ": " + "; ".join(r.get("flags", []))[:60])])
+                     st + ("" if st == "ok" else ": " + textwrap.shorten("; ".join(r.get("flags", [])), 28))])
         colours.append({"ok": "white", "suspect": "#fde6c8", "failed": "#f8c9cc"}.get(st, "white"))
     return cols, rows, colours
 
@@ -71,20 +72,21 @@ def write_pdf(data, path: str | Path) -> Path:
                 f"Age: {'not given' if p.age is None else f'{p.age:g}'}",
                 f"Session: {data.session_name}   Body model: {data.gender}   Frames used: {len(data.frames_used)} of "
                 f"{len(data.fits)}   Software: Silhouette & Shadow Studio {data.version}",
-                f"Notes: {p.notes[:150] or '–'}",
-                f"Quality: {summary_line({f: q for f, q in data.qualities.items() if q.get('status') != 'unchecked'})[:150]}"]
+                textwrap.shorten(f"Notes: {p.notes or '–'}", 140),
+                *textwrap.wrap("Quality: " + summary_line({f: q for f, q in data.qualities.items()
+                                                           if q.get("status") != "unchecked"}), 120)[:3]]
         fig.text(0.06, 0.93, "\n".join(meta), fontsize=8, va="top")
         cols, rows, colours = _measurement_rows(data.table)
         ax = fig.add_axes([0.04, 0.05, 0.92, 0.8])
         ax.axis("off")
         t = ax.table(cellText=rows, colLabels=cols, loc="upper center", cellLoc="left",
-                     colWidths=[0.22, 0.13, 0.17, 0.13, 0.12, 0.23],
+                     colWidths=[0.25, 0.14, 0.16, 0.1, 0.11, 0.24],
                      cellColours=[[c] * len(cols) for c in colours])
         t.auto_set_font_size(False)
-        t.set_fontsize(7)
+        t.set_fontsize(6.5)
         t.scale(1, 1.5)
         fig.text(0.06, 0.03, "ISO 7250-1 definitions; σ = frames ⊕ calibration ⊕ fit posterior. A struck figure in "
-                 "the HTML is marked (suspect)/(failed) here.", fontsize=7)
+                 "the HTML is marked ⚠ and shaded here (orange: suspect, red: failed).", fontsize=7)
         pdf.savefig(fig)
         plt.close(fig)
 

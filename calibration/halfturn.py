@@ -145,11 +145,19 @@ def resolve_half_turns(
             pose[c, v] = (R, t)
         return pose[c, v]
 
+    R_ref = {reference: np.eye(3)}  # camera-from-reference rotations of the cameras placed so far
+    seen_rot: dict[str, np.ndarray] = {}  # view -> board rotation in the reference frame
+
+    def register(c):
+        for v, d in obs[c].items():
+            if d.usable and d.n == board.n_corners and v not in seen_rot:
+                seen_rot[v] = R_ref[c].T @ board_pose(c, v)[0]
+
+    register(reference)
     ambiguous = []
     for parent, child in edges:
         key = (parent, child) if (parent, child) in graph else (child, parent)
-        shared = graph[key]
-        full = [v for v in shared if obs[child][v].n == board.n_corners and obs[parent][v].n == board.n_corners]
+        full = [v for v in graph[key] if obs[child][v].n == board.n_corners and obs[parent][v].n == board.n_corners]
         cands = []
         for v in full:
             Rp, _ = board_pose(parent, v)
@@ -163,21 +171,31 @@ def resolve_half_turns(
         if rival >= votes:
             if parent in hints and child in hints:
                 report[child] = "from the corner-0 hint"
-                continue
-            ambiguous.append((parent, child, len(full)))
+                R_ref[child] = cands[0][0] @ R_ref[parent]
+                register(child)
+            else:
+                ambiguous.append((parent, child, len(full)))
             continue
+        R_ref[child] = X @ R_ref[parent]
         flips = 0
-        for v, (a, b) in zip(full, cands):
-            if rotation_angle_deg(X.T @ b) < rotation_angle_deg(X.T @ a):
+        for v, d in list(obs[child].items()):
+            if not (d.usable and d.n == board.n_corners and v in seen_rot):
+                continue
+            Rc, tc = board_pose(child, v)
+            Rc2, _ = turned_pose(Rc, tc, centre)
+            keep = rotation_angle_deg((R_ref[child].T @ Rc).T @ seen_rot[v])
+            turn = rotation_angle_deg((R_ref[child].T @ Rc2).T @ seen_rot[v])
+            if turn < keep:
                 if child in hints:
                     raise CalibrationError(
                         f"view {v!r}: the corner-0 hint contradicts the rig geometry (camera {parent!r} and the "
                         "other views agree on the other numbering); check the hint's pixel",
                         camera=child,
                     )
-                obs[child][v] = turned(obs[child][v])
+                obs[child][v] = turned(d)
                 pose.pop((child, v), None)
                 flips += 1
+        register(child)
         report[child] = f"renumbered in {flips} views" if flips else "as detected"
     if ambiguous:
         pairs = ", ".join(f"{p}-{c}" for p, c, _ in ambiguous)

@@ -38,9 +38,9 @@ RECT_SQUARE_PX = 48
 RECT_PAD_SQUARES = 2.5
 #: Erosions of the white tried before detection, as fractions of a rectified square.
 ERODE_FRACTIONS = (0.0, 0.15, 0.27)
-MAX_QUADS = 4
+MAX_QUADS = 3
 #: Quadrilaterals whose dark-square count is further than this from the board's (:func:`checker_score`) are not tried.
-MAX_CHECKER_SCORE = 0.5
+MAX_CHECKER_SCORE = 0.9
 
 
 def find_quads(gray: np.ndarray, board: Board, *, min_area: float = 150.0, max_fraction: float = 0.3) -> list[np.ndarray]:

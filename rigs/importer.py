@@ -27,7 +27,7 @@ import numpy as np
 
 from rigs.session import SessionError, SessionWriter
 
-__all__ = ["Source", "FootageError", "probe", "check_sources", "import_session", "IMAGE_SUFFIXES", "NOMINAL_FLAG"]
+__all__ = ["Source", "FootageError", "probe", "check_sources", "import_session", "time_spread_ms", "IMAGE_SUFFIXES", "NOMINAL_FLAG"]
 
 log = logging.getLogger(__name__)
 
@@ -171,6 +171,19 @@ def check_sources(sources: list[Source], *, trim: bool = False, what: str = "vid
         log.warning("%ss trimmed to the shortest: %d frames (%s)", what, shortest, counts)
         return shortest
     return next(iter(counts.values()))
+
+
+def time_spread_ms(sources: list[Source], frames: list[int]) -> float:
+    """Largest difference (ms) between the cameras' container times of one frame (0 without times).
+
+    Synchronised footage differs by well under a frame period; more means the footage (or the
+    container's clock) does not start at the same instant in every camera.
+    """
+    timed = [s for s in sources if s.fps and s.container_times]
+    if len(timed) < 2 or not frames:
+        return 0.0
+    t = np.stack([s.times_ns[frames] for s in timed])
+    return float((t.max(0) - t.min(0)).max() / 1e6)
 
 
 def _frames(source: Source, indices):

@@ -117,3 +117,16 @@ def test_numbered_image_folders(tmp_path):
 
         import_session(tmp_path / "s2", [probe("l", tmp_path / "l"), probe("r", tmp_path / "r")], list(range(12)))
     assert Session.open(tmp_path / "s2").info["status"] == "aborted"
+
+
+def test_time_spread_between_cameras():
+    from pathlib import Path
+
+    from rigs.importer import Source, time_spread_ms
+
+    def src(name, ms):
+        return Source(name, Path(name), "video", len(ms), 50.0, SIZE, np.array(ms) * 1_000_000, np.zeros(len(ms), bool))
+
+    a, b = src("a", [60, 80, 100]), src("b", [40, 80, 100])  # as the UU cam4 video against the others
+    assert time_spread_ms([a, b], [0, 1]) == 20.0
+    assert time_spread_ms([a, b], [1, 2]) == 0.0

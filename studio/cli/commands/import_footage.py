@@ -78,7 +78,7 @@ def run(args: argparse.Namespace) -> int:
     from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
     from rich.table import Table
 
-    from rigs.importer import check_sources, import_session, probe
+    from rigs.importer import check_sources, import_session, probe, time_spread_ms
     from rigs.session import SessionError
     from studio.cli import CommandError
     from studio.workspace.frames import FrameSelectionError, select_frames
@@ -128,6 +128,11 @@ def run(args: argparse.Namespace) -> int:
                                     overwrite=args.overwrite, compression=args.compression, progress=progress)
     except SessionError as exc:
         raise CommandError(str(exc)) from None
+    spread = time_spread_ms(sources, sorted(set(frames)))
+    period = 1000.0 / sources[0].fps if sources[0].fps else None
+    if period and spread > 0.5 * period:
+        console.print(f"[yellow]note: the container times of one frame differ by up to {spread:.0f} ms between cameras "
+                      f"({spread / period:.1f} frame periods): check that the footage starts at the same instant[/yellow]")
     print(f"imported {writer.frame_count} frames of {len(sources)} cameras into {args.out}"
           + (" (with calibration.json)" if calibration else " (no calibration: run 'studio calibrate' and copy it in)"))
     return 0

@@ -158,13 +158,15 @@ def detect_in_quad(gray: np.ndarray, quad: np.ndarray, board: Board) -> np.ndarr
     """
     import cv2
 
+    from calibration.detect import find_chessboard_sb
+
     size, pad, sq = _rect_geometry(np.asarray(quad, np.float64), board)
     rect, H = rectify(gray, quad, size, pad)
     flags = cv2.CALIB_CB_ADAPTIVE_THRESH | cv2.CALIB_CB_NORMALIZE_IMAGE
     eroded = [cv2.erode(rect, np.ones((k, k), np.uint8)) if k else rect
               for k in (int(round(f * sq)) | 1 if f > 0 else 0 for f in ERODE_FRACTIONS)]  # fmt: skip
     finders = (lambda x: cv2.findChessboardCorners(x, board.corner_grid, flags=flags),
-               lambda x: cv2.findChessboardCornersSB(x, board.corner_grid, flags=cv2.CALIB_CB_NORMALIZE_IMAGE))  # fmt: skip
+               lambda x: find_chessboard_sb(x, board.corner_grid, cv2.CALIB_CB_NORMALIZE_IMAGE))  # fmt: skip
     for find in finders:  # the fast detector on every erosion first
         for img in eroded:
             found, corners = find(img)

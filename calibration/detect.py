@@ -150,6 +150,16 @@ def detect_board(
     return det
 
 
+def find_chessboard_sb(gray: np.ndarray, pattern: tuple[int, int], flags: int):
+    """``cv2.findChessboardCornersSB`` made repeatable: it draws from OpenCV's global random
+    generator, so the same image could give differently numbered corners depending on what ran
+    before in the process (seen on the Pose2Sim photos); the generator is seeded first."""
+    import cv2
+
+    cv2.setRNGSeed(0)
+    return cv2.findChessboardCornersSB(gray, pattern, flags=flags)
+
+
 def _find_checkerboard(gray: np.ndarray, board: Board, max_side: int, robust: bool) -> tuple[np.ndarray | None, str]:
     """Corners (N, 2) at full resolution before refinement, and the method that found them."""
     import cv2
@@ -172,7 +182,7 @@ def _find_checkerboard(gray: np.ndarray, board: Board, max_side: int, robust: bo
         interp = cv2.INTER_AREA if s < 1 else cv2.INTER_CUBIC
         img = cv2.resize(gray, (round(w * s), round(h * s)), interpolation=interp) if s != 1 else gray
         for method, find in (("opencv", lambda x: cv2.findChessboardCorners(x, pattern, flags=flags)),
-                             ("sb", lambda x: cv2.findChessboardCornersSB(x, pattern, flags=cv2.CALIB_CB_EXHAUSTIVE))):
+                             ("sb", lambda x: find_chessboard_sb(x, pattern, cv2.CALIB_CB_EXHAUSTIVE))):
             found, corners = find(img)
             if found:
                 # (0,0) is a pixel centre in both images: x_full = (x_scaled + 0.5) / s - 0.5

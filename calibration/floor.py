@@ -233,19 +233,13 @@ def calibrate_floor(
     for k, dets in enumerate(placements):
         for c, v in floor_check(world, dets, surface).items():
             check[c if len(placements) == 1 else f"{c}/{k}"] = v
-    if max_plane_mm is not None:
-        bad = {c: round(v["plane_mm"], 1) for c, v in check.items() if v["plane_mm"] > max_plane_mm}
+    gates = (("plane_mm", max_plane_mm, "mm", "see the floor board off the calibrated plane by more than {} mm; "
+              "recalibrate these cameras' extrinsics or recapture the floor view"),
+             ("tilt_deg", max_tilt_deg, "degrees", "see the floor board tilted from the fitted floor by more than {} deg; "
+              "their extrinsics or the board's corner numbering disagree with the rig"))  # fmt: skip
+    for key, limit, unit, why in gates:
+        bad = {c: round(v[key], 1) for c, v in check.items() if limit is not None and v[key] > limit}
         if bad:
-            raise CalibrationError(
-                f"floor check failed: cameras {bad} (mm) see the floor board off the calibrated plane "
-                f"by more than {max_plane_mm} mm; recalibrate these cameras' extrinsics or recapture the floor view"
-            )
-    if max_tilt_deg is not None:
-        bad = {c: round(v["tilt_deg"], 1) for c, v in check.items() if v["tilt_deg"] > max_tilt_deg}
-        if bad:
-            raise CalibrationError(
-                f"floor check failed: cameras {bad} (degrees) see the floor board tilted from the fitted floor by more "
-                f"than {max_tilt_deg} deg; their extrinsics or the board's corner numbering disagree with the rig"
-            )
+            raise CalibrationError(f"floor check failed: cameras {bad} ({unit}) {why.format(limit)}")
     return FloorResult(world, ground, R_rw, t_rw, rms, check, placements)
 

@@ -117,3 +117,37 @@ def test_floor_gates_refuse_tilt_and_wrong_units(scene):
         scale_check(mm, dets, scene.board)
     one = {victim: dets[victim]}
     assert scale_check(scene.cameras, one, scene.board)["skipped"].startswith("the whole board is seen by 1 camera")
+
+
+def test_cli_extrinsics_from_rendered_folders_with_estimated_focal(tmp_path, capsys):
+    """Two cameras, four placements of a symmetric board on the floor and tilted: `calibrate extrinsics`
+    without intrinsics (`--estimate focal`) recovers the relative rotation to 0.5 deg."""
+    import cv2
+
+    from calibration import RigCalibration
+    from calibration.synthetic import render_board_view
+    from studio.cli import main
+
+    board = Board("floor8x6", "checkerboard", 8, 6, 0.115)
+    cams = camera_ring(2, radius=2.5, height=1.5, target=(0.4, 0.3, 0.0), size=(644, 486), focal=490.0,
+                       dist=(0, 0, 0, 0, 0), principal_offset=(0, 0), start=0.3)
+    (tmp_path / "b.yaml").write_text("name: b\nkind: checkerboard\ninner_corners: [8, 6]\nsquare_size: 0.115\n")
+    rng = np.random.default_rng(2)
+    from calibration.rotation import rotvec_to_matrix
+
+    poses = {}
+    for k, (x, y, tilt) in enumerate([(0, 0, 0), (0.3, -0.2, 20), (-0.3, 0.2, -25), (0.1, 0.3, 15)]):
+        R, t = floor_board_pose(board, (x, y), 0.2 * k)
+        poses[f"p{k}"] = (rotvec_to_matrix(np.radians([tilt, 0, 0])) @ R, t + [0, 0, 0.3 * (k > 0)])
+    for name, cam in cams.items():
+        (tmp_path / name).mkdir()
+        for view, pose in poses.items():
+            img = render_board_view(cam, board, pose, blur_sigma=0.7, rng=rng)
+            cv2.imwrite(str(tmp_path / name / f"{view}.png"), img[:, :, ::-1])
+    out = tmp_path / "ex.json"
+    argv = ["calibrate", "extrinsics", "--board", str(tmp_path / "b.yaml"), "-o", str(out), "--estimate", "focal"]
+    assert main(argv + [f"{n}={tmp_path / n}" for n in cams]) == 0
+    assert "intrinsics estimated (focal)" in capsys.readouterr().out
+    rig = RigCalibration.load(out)
+    assert rel_rotation_error(rig.cameras, cams, "cam00", "cam01") < 0.5
+    assert rig["cam00"].K[0, 0] == pytest.approx(490.0, rel=0.02)

@@ -80,6 +80,9 @@ def register(subparsers) -> None:
     qa.add_argument("--free-intrinsics", action="store_true")
     qa.add_argument("--thickness", type=float, default=0.0)
     qa.add_argument("--model", choices=("pinhole",), default="pinhole")
+    qa.add_argument("--corners", metavar="FILE", help='JSON {"camera": [x, y]}: pixel of corner 0 in every view of that '
+                    "camera (decides a symmetric board's half turn when the board never moves)")
+    _floor_gates(qa)
     qa.set_defaults(func=run_all)
     p.set_defaults(func=lambda args: (p.print_help(), 2)[1])
 
@@ -293,7 +296,6 @@ def _load_any(path: str):
 def run_floor(args) -> int:
     from calibration.floor import calibrate_floor
     from calibration.report import write_report
-    from calibration.rigchecks import camera_heights, scale_check
     from studio.cli.commands._board_views import detect_views, load_corners
 
     board = _board(args)
@@ -313,11 +315,27 @@ def run_floor(args) -> int:
             log.warning("camera %s: floor board not used (%s)", name, dets[name].reason)
     fl = calibrate_floor(rig.cameras, dets, thickness=args.thickness, board=board,
                          max_tilt_deg=args.max_tilt, max_plane_mm=args.max_plane_mm)
+    checks = _floor_summary(fl, board)
+    meta = {**rig.metadata, "world_frame": "floor board (z up, floor z = 0)", "floor_check": fl.check, **checks}
+    _save(fl.cameras, meta, args, fl.ground)
+    rep = write_report(_report_path(args), title="Floor calibration", floor=fl, cameras=fl.cameras)
+    print(f"wrote {rep}")
+    return 0
+
+
+def _floor_summary(fl, board) -> dict:
+    """Per-camera floor table, the scale and height checks (raise when implausible); their metadata."""
+    from calibration.rigchecks import camera_heights, scale_check
+
     heights = camera_heights(fl.cameras, fl.ground)
     scale = scale_check(fl.cameras, fl.placements[0], board)
-    rows = {c: {"method": dets[c].extra.get("method", "-") if dets[c].usable else "not found",
-                "tilt deg": f"{v['tilt_deg']:.2f}", "off plane mm": f"{v['plane_mm']:.1f}", "RMS px": f"{v['reproj_px']:.3f}",
-                "height m": f"{heights[c]:.3f}"} for c, v in fl.check.items()}
+    dets = fl.placements[0]
+    rows = {}
+    for key, v in fl.check.items():  # key: camera, or camera/placement with several floor placements
+        cam = key.split("/")[0]
+        det = dets.get(cam)
+        rows[key] = {"method": det.extra.get("method", "-") if det is not None else "-", "tilt deg": f"{v['tilt_deg']:.2f}",
+                     "off plane mm": f"{v['plane_mm']:.1f}", "RMS px": f"{v['reproj_px']:.3f}", "height m": f"{heights[cam]:.3f}"}
     _rig_table("floor", rows, ["method", "tilt deg", "off plane mm", "RMS px", "height m"])
     if scale["ratio"] is None:
         print(f"scale check skipped: {scale['skipped']}")
@@ -325,12 +343,7 @@ def run_floor(args) -> int:
         print(f"scale: board squares {1000 * scale['square_m']:.1f} mm triangulated vs {1000 * board.square_size:.1f} mm "
               f"printed (ratio {scale['ratio']:.4f})")
     print("world z up, every camera above the floor")
-    meta = {**rig.metadata, "world_frame": "floor board (z up, floor z = 0)", "floor_check": fl.check,
-            "camera_heights_m": heights, "scale_check": scale}
-    _save(fl.cameras, meta, args, fl.ground)
-    rep = write_report(_report_path(args), title="Floor calibration", floor=fl, cameras=fl.cameras)
-    print(f"wrote {rep}")
-    return 0
+    return {"camera_heights_m": heights, "scale_check": scale}
 
 
 def run_all(args) -> int:
@@ -362,7 +375,7 @@ def run_all(args) -> int:
         task = prog.add_task("detect board", total=len(session.frame_indices))
         for k, index in enumerate(session.frame_indices):
             for cam, image in session.frame(index).items():
-                det = detect_board(image, board, view=f"{index:06d}", max_side=args.max_side)
+                det = detect_board(image, board, view=f"{index:06d}", max_side=args.max_side, robust=index in floor_frames)
                 if index in floor_frames:
                     floor[floor_frames.index(index)][cam] = det
                 obs[cam][det.view] = det  # floor views are board views too (bundle adjustment)
@@ -374,12 +387,17 @@ def run_all(args) -> int:
     else:
         results = {c: calibrate_intrinsics(list(obs[c].values()), camera=c) for c in session.cameras}
         cams = {c: r.to_camera() for c, r in results.items()}
-    ex = calibrate_extrinsics(cams, obs, free_intrinsics=args.free_intrinsics)
-    fl = calibrate_floor(ex.cameras, floor, thickness=args.thickness)
+    from studio.cli.commands._board_views import load_corners
+
+    _outer, hints = load_corners(args.corners)
+    ex = calibrate_extrinsics(cams, obs, free_intrinsics=args.free_intrinsics, board=board, hints=hints)
+    fl = calibrate_floor(ex.cameras, floor, thickness=args.thickness, board=board, max_tilt_deg=args.max_tilt,
+                         max_plane_mm=args.max_plane_mm)
     if results:
         _intrinsics_table(results)
     print(f"bundle adjustment: RMS {ex.bundle.rms_before:.3f} -> {ex.bundle.rms_after:.3f} px")
-    meta = {**(_metadata_intrinsics(board, results) if results else {"calibrated_by": "studio calibrate", "board": board.to_dict()}),
+    checks = _floor_summary(fl, board)
+    meta = {**checks, **(_metadata_intrinsics(board, results) if results else {"calibrated_by": "studio calibrate", "board": board.to_dict()}),
             "session": str(args.session),
             "extrinsics": {"reference": ex.info["reference"], "rms_px": ex.bundle.rms_after, "camera_rms_px": ex.bundle.camera_rms,
                            "method": ex.bundle.method},

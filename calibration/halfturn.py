@@ -54,8 +54,10 @@ def is_half_turn_symmetric(board: Board) -> bool:
 
 
 def rotation_angle_deg(R: np.ndarray) -> float:
-    """Angle (degrees) of a rotation matrix (3, 3)."""
-    return float(np.degrees(np.arccos(np.clip((np.trace(R) - 1) / 2, -1.0, 1.0))))
+    """Angle (degrees) of a rotation matrix (3, 3) (:func:`calibration.rotation.rotation_angle`)."""
+    from calibration.rotation import rotation_angle
+
+    return float(np.degrees(rotation_angle(R)))
 
 
 def turned(det: Detection) -> Detection:

@@ -31,6 +31,9 @@ from calibration.intrinsics import (
 )
 from calibration.report import render_report, write_report
 from calibration.sampling import SampledViews, iter_video_frames, sample_views, sharpness
+from calibration.board_quad import corners_from_outer, find_quads
+from calibration.halfturn import align_to_rig, is_half_turn_symmetric, resolve_half_turns
+from calibration.rigchecks import camera_heights, scale_check
 
 __all__ = [
     "Camera",
@@ -71,4 +74,11 @@ __all__ = [
     "sharpness",
     "render_report",
     "write_report",
+    "find_quads",
+    "corners_from_outer",
+    "is_half_turn_symmetric",
+    "resolve_half_turns",
+    "align_to_rig",
+    "scale_check",
+    "camera_heights",
 ]

@@ -114,6 +114,8 @@ def detect_board(
     view: str = "",
     max_side: int = 1000,
     min_corners: int = MIN_CORNERS,
+    robust: bool = False,
+    outer_corners: np.ndarray | None = None,
 ) -> Detection:
     """Find ``board`` in ``image`` (RGB or grey) and refine the corners to sub-pixel accuracy.
 
@@ -127,11 +129,20 @@ def detect_board(
         Checkerboard search runs on a copy whose longer side is at most this many pixels.
     min_corners : int
         ChArUco views with fewer corners are rejected.
+    robust : bool
+        Checkerboards OpenCV misses: also try an upscaled copy, then the board's quadrilateral
+        (:mod:`calibration.board_quad`); slower on views without a board (~1 s).
+    outer_corners : (4, 2), optional
+        The user's four outer inner corners (corner 0, end of its row, opposite corner, start
+        of the last row): the grid is refined from them when every detector fails.
+
+    The method that found the board is ``det.extra["method"]`` (``"opencv"``, ``"sb"``,
+    ``"upscaled"``, ``"quad"`` or ``"user"``).
     """
     gray = to_gray(image)
     h, w = gray.shape
     if board.kind == "checkerboard":
-        det = _detect_checkerboard(gray, board, view, max_side)
+        det = _detect_checkerboard(gray, board, view, max_side, robust or outer_corners is not None, outer_corners)
     else:
         det = _detect_charuco(gray, board, view, min_corners)
     if det.usable and not _spread_rank(det.image_points, tol=1.0):
@@ -139,23 +150,72 @@ def detect_board(
     return det
 
 
-def _detect_checkerboard(gray: np.ndarray, board: Board, view: str, max_side: int) -> Detection:
+def find_chessboard_sb(gray: np.ndarray, pattern: tuple[int, int], flags: int):
+    """``cv2.findChessboardCornersSB`` made repeatable: it draws from OpenCV's global random
+    generator, so the same image could give differently numbered corners depending on what ran
+    before in the process (seen on the Pose2Sim photos); the generator is seeded first."""
+    import cv2
+
+    cv2.setRNGSeed(0)
+    return cv2.findChessboardCornersSB(gray, pattern, flags=flags)
+
+
+def _find_checkerboard(gray: np.ndarray, board: Board, max_side: int, robust: bool) -> tuple[np.ndarray | None, str]:
+    """Corners (N, 2) at full resolution before refinement, and the method that found them."""
     import cv2
 
     h, w = gray.shape
     pattern = board.corner_grid
     scale = min(1.0, max_side / max(h, w))
-    small = cv2.resize(gray, (round(w * scale), round(h * scale)), interpolation=cv2.INTER_AREA) if scale < 1 else gray
+    if robust and scale == 1.0 and max(h, w) <= 1200:
+        scales = (1.0, 2.0)  # small images: an upscaled copy helps both detectors on tiny squares
+    else:
+        scales = (scale,)
     flags = cv2.CALIB_CB_ADAPTIVE_THRESH | cv2.CALIB_CB_NORMALIZE_IMAGE
-    found, corners = cv2.findChessboardCorners(small, pattern, flags=flags)
-    if not found:
-        found, corners = cv2.findChessboardCornersSB(small, pattern, flags=cv2.CALIB_CB_EXHAUSTIVE)
-    if not found:
+    for s in scales:
+        if s > 1 and robust:  # the board's quadrilateral before the (slow) upscaled search
+            from calibration.board_quad import detect_by_quads
+
+            pts = detect_by_quads(gray, board)
+            if pts is not None:
+                return pts, "quad"
+        interp = cv2.INTER_AREA if s < 1 else cv2.INTER_CUBIC
+        img = cv2.resize(gray, (round(w * s), round(h * s)), interpolation=interp) if s != 1 else gray
+        for method, find in (("opencv", lambda x: cv2.findChessboardCorners(x, pattern, flags=flags)),
+                             ("sb", lambda x: find_chessboard_sb(x, pattern, cv2.CALIB_CB_EXHAUSTIVE))):
+            found, corners = find(img)
+            if found:
+                # (0,0) is a pixel centre in both images: x_full = (x_scaled + 0.5) / s - 0.5
+                return (corners.reshape(-1, 2).astype(np.float64) + 0.5) / s - 0.5, method if s <= 1 else "upscaled"
+    if robust and len(scales) == 1:
+        from calibration.board_quad import detect_by_quads
+
+        pts = detect_by_quads(gray, board)
+        if pts is not None:
+            return pts, "quad"
+    return None, ""
+
+
+def _detect_checkerboard(gray: np.ndarray, board: Board, view: str, max_side: int, robust: bool = False,
+                         outer_corners: np.ndarray | None = None) -> Detection:  # fmt: skip
+    import cv2
+
+    h, w = gray.shape
+    pattern = board.corner_grid
+    pts, method = (None, "") if outer_corners is not None else _find_checkerboard(gray, board, max_side, robust)
+    if pts is None and outer_corners is not None:
+        from calibration.board_quad import corners_from_outer
+
+        pts, method = corners_from_outer(gray, outer_corners, board), "user"
+        ids = np.arange(board.n_corners, dtype=np.int64)
+        return Detection(view, ids, pts, board.object_points[ids], (w, h), "ok", "", {"method": method})
+    if pts is None:
         return Detection.rejected(
             view, (w, h), f"checkerboard {pattern[0]}x{pattern[1]} not found (whole board must be visible)"
         )
-    # (0,0) is a pixel centre in both images: x_full = (x_small + 0.5) / scale - 0.5
-    pts = (corners.reshape(-1, 2).astype(np.float64) + 0.5) / scale - 0.5
+    if method == "quad":  # refined in the rectified view already
+        ids = np.arange(board.n_corners, dtype=np.int64)
+        return Detection(view, ids, pts, board.object_points[ids], (w, h), "ok", "", {"method": method})
     # sub-pixel window: ~40 % of the smallest square side in pixels, 3..15
     grid = pts.reshape(pattern[1], pattern[0], 2)
     side = min(
@@ -167,7 +227,7 @@ def _detect_checkerboard(gray: np.ndarray, board: Board, view: str, max_side: in
     refined = cv2.cornerSubPix(gray, pts.astype(np.float32).reshape(-1, 1, 2), (win, win), (-1, -1), criteria)
     pts = refined.reshape(-1, 2).astype(np.float64)
     ids = np.arange(board.n_corners, dtype=np.int64)
-    return Detection(view, ids, pts, board.object_points[ids], (w, h), "ok", "", {"subpix_window": win})
+    return Detection(view, ids, pts, board.object_points[ids], (w, h), "ok", "", {"subpix_window": win, "method": method})
 
 
 def _detect_charuco(gray: np.ndarray, board: Board, view: str, min_corners: int) -> Detection:

@@ -251,6 +251,8 @@ def calibrate_extrinsics(
     loss: str = "soft_l1",
     f_scale: float = 1.0,
     max_nfev: int = 200,
+    board=None,
+    hints: dict | None = None,
 ) -> ExtrinsicsResult:
     """Poses of all cameras (intrinsics given) from board views they share.
 
@@ -265,10 +267,21 @@ def calibrate_extrinsics(
         Also refine fx fy cx cy k1 k2 p1 p2 k3 (fisheye cameras: k1 k2 k3 k4) in the bundle
         adjustment.
 
+    board : Board, optional
+        With a half-turn-symmetric checkerboard, every camera's corner numbering is first made
+        to agree (:func:`calibration.halfturn.resolve_half_turns`, using ``hints``: camera →
+        pixel of corner 0); undecidable cameras are refused by name.
+
     Fisheye cameras (``model="fisheye"``) are honoured throughout: PnP on corners undistorted
     through their model, bundle adjustment projecting through ``cv2.fisheye``'s model.
     """
+    half_turn = {}
+    if board is not None:
+        from calibration.halfturn import resolve_half_turns
+
+        observations, half_turn = resolve_half_turns(cameras, observations, board, hints=hints, reference=reference)
     init_cams, init_poses, info = initial_rig(cameras, observations, reference)
+    info["half_turn"] = half_turn
     ba = bundle_adjust(
         init_cams,
         init_poses,

@@ -123,7 +123,8 @@ def floor_check(
 
     For every camera that sees the floor board: PnP with its own intrinsics and calibrated pose
     gives the corners in world coordinates; ``plane_mm`` is the largest distance of those
-    corners from the ground plane (millimetres); ``reproj_px`` is the RMS pixel error of the
+    corners from the ground plane (millimetres); ``tilt_deg`` the angle between the board plane
+    this camera sees on its own and the ground plane; ``reproj_px`` is the RMS pixel error of the
     floor corners placed by the *calibration* (from all cameras) in this camera.
     """
     ground = GroundPlane.floor() if ground is None else ground
@@ -139,7 +140,9 @@ def floor_check(
         Xw = (d.object_points @ Rcb.T + tcb - cam.t) @ cam.R  # R^T (X_c - t)
         dist = ground.signed_distance(Xw)
         e = cam.project(d.object_points @ Rwb.T + twb) - d.image_points
+        normal_w = cam.R.T @ Rcb[:, 2]
         out[c] = {
+            "tilt_deg": float(np.degrees(np.arccos(min(1.0, abs(float(normal_w @ ground.normal)))))),
             "plane_mm": float(np.max(np.abs(dist)) * 1000),
             "mean_height_mm": float(np.mean(dist) * 1000),
             "reproj_px": float(np.sqrt(np.mean(np.sum(e**2, axis=1)))),
@@ -158,6 +161,7 @@ class FloorResult:
     t_rig_from_world: np.ndarray
     board_rms: dict
     check: dict = field(default_factory=dict)
+    placements: list = field(default_factory=list)  # the floor detections used, numbered alike across cameras
 
 
 def calibrate_floor(
@@ -166,6 +170,8 @@ def calibrate_floor(
     *,
     thickness: float = 0.0,
     max_plane_mm: float | None = None,
+    max_tilt_deg: float | None = None,
+    board=None,
 ) -> FloorResult:
     """Move a calibrated rig into the world frame of a floor board (floor z = 0, z up).
 
@@ -180,12 +186,30 @@ def calibrate_floor(
         Board thickness in metres: the printed face is this far above the floor.
     max_plane_mm : float, optional
         Raise if any camera puts the floor corners further than this from z = 0.
+    max_tilt_deg : float, optional
+        Raise if the board plane any camera sees on its own is tilted more than this from the floor.
+    board : Board, optional
+        The floor board: a half-turn-symmetric checkerboard's numbering is first made to agree
+        across the calibrated cameras (:func:`calibration.halfturn.align_to_rig`).
+
+    Every camera must end up above the floor (world z up): a camera below it means the rig
+    and the floor board disagree (e.g. a mirrored rig) and is refused by name.
     """
     if thickness < 0:
         raise CalibrationError(f"floor board thickness must be >= 0 metres, got {thickness}")
     placements = [detections] if isinstance(detections, dict) else list(detections)
     if not placements:
         raise CalibrationError("no floor-board views given; lay the board flat on the floor and capture it")
+    if board is not None:
+        from calibration.halfturn import align_to_rig
+
+        aligned = []
+        for k, dets in enumerate(placements):
+            dets, renumbered = align_to_rig(cameras, dets, board)
+            if renumbered:
+                log.warning("floor board placement %d: corner numbering turned by 180 deg in cameras %s to agree with the rig", k, renumbered)
+            aligned.append(dets)
+        placements = aligned
     poses, rms = [], {}
     for k, dets in enumerate(placements):
         R, t, r = fit_floor_board(cameras, dets)
@@ -197,18 +221,25 @@ def calibrate_floor(
     )
     R_rw, t_rw = world_from_floor(cameras, poses, board_points, thickness)
     world = transform_cameras(cameras, R_rw, t_rw)
+    below = {n: round(float(c.center[2]), 3) for n, c in world.items() if c.center[2] <= 0}
+    if below:
+        raise CalibrationError(
+            f"cameras {below} (height, m) come out below the floor with z up: the rig and the floor board disagree "
+            "(a mirrored rig or a board seen from below); recalibrate these cameras' extrinsics"
+        )
     ground = GroundPlane.floor()
     surface = GroundPlane(np.array([0.0, 0.0, 1.0]), thickness)
     check = {}
     for k, dets in enumerate(placements):
         for c, v in floor_check(world, dets, surface).items():
             check[c if len(placements) == 1 else f"{c}/{k}"] = v
-    if max_plane_mm is not None:
-        bad = {c: round(v["plane_mm"], 1) for c, v in check.items() if v["plane_mm"] > max_plane_mm}
+    gates = (("plane_mm", max_plane_mm, "mm", "see the floor board off the calibrated plane by more than {} mm; "
+              "recalibrate these cameras' extrinsics or recapture the floor view"),
+             ("tilt_deg", max_tilt_deg, "degrees", "see the floor board tilted from the fitted floor by more than {} deg; "
+              "their extrinsics or the board's corner numbering disagree with the rig"))  # fmt: skip
+    for key, limit, unit, why in gates:
+        bad = {c: round(v[key], 1) for c, v in check.items() if limit is not None and v[key] > limit}
         if bad:
-            raise CalibrationError(
-                f"floor check failed: cameras {bad} (mm) see the floor board off the calibrated plane "
-                f"by more than {max_plane_mm} mm; recalibrate these cameras' extrinsics or recapture the floor view"
-            )
-    return FloorResult(world, ground, R_rw, t_rw, rms, check)
+            raise CalibrationError(f"floor check failed: cameras {bad} ({unit}) {why.format(limit)}")
+    return FloorResult(world, ground, R_rw, t_rw, rms, check, placements)
 

@@ -213,6 +213,8 @@ def calibrate_intrinsics(
     outlier_min_px: float = 1.0,
     coverage_grid: tuple[int, int] = (8, 6),
     max_focal_std: float = 0.05,
+    fix_principal_point: bool = False,
+    focal_only: bool = False,
 ) -> IntrinsicsResult:
     """Calibrate one camera from board detections.
 
@@ -235,6 +237,11 @@ def calibrate_intrinsics(
         Outlier-view rule (see module docstring).
     max_focal_std : float
         Refuse when OpenCV's standard deviation of fx exceeds this fraction of fx (pinhole).
+    fix_principal_point : bool
+        Keep the principal point at the image centre (views that cannot constrain it).
+    focal_only : bool
+        One focal length (fx = fy), principal point at the centre, no distortion: what a single
+        tilted view of a plane still constrains (e.g. one board lying on the floor); needs one view.
 
     Raises
     ------
@@ -246,6 +253,9 @@ def calibrate_intrinsics(
 
     if model not in ("pinhole", "fisheye"):
         raise CalibrationError(f"camera {camera!r}: model must be 'pinhole' or 'fisheye', got {model!r}")
+    if focal_only:
+        fix_aspect_ratio = fix_principal_point = zero_tangent = True
+        n_radial, min_views = 0, 1
     rejected = {d.view: d.reason for d in detections if not d.usable}
     usable = [d for d in detections if d.usable]
     if image_size is None:
@@ -268,7 +278,7 @@ def calibrate_intrinsics(
             "and in different parts of the image"
         )
     spread = view_plane_spread_deg(usable, image_size)
-    if spread < min_plane_spread_deg:
+    if spread < min_plane_spread_deg and not (fix_principal_point and fix_aspect_ratio):
         raise CalibrationError(
             f"camera {camera!r}: all {len(usable)} views show the board in parallel planes (max angle "
             f"{spread:.1f} deg < {min_plane_spread_deg} deg) - degenerate for focal length; capture views "
@@ -278,7 +288,7 @@ def calibrate_intrinsics(
     fisheye = model == "fisheye"
     kept = list(usable)
     while True:
-        K, dist, rvecs, tvecs, k_std = _fit(kept, image_size, fisheye, fix_aspect_ratio, zero_tangent, n_radial)
+        K, dist, rvecs, tvecs, k_std = _fit(kept, image_size, fisheye, fix_aspect_ratio, zero_tangent, n_radial, fix_principal_point)
         errs = {}
         all_err = []
         for d, rv, tv in zip(kept, rvecs, tvecs):
@@ -324,7 +334,7 @@ def calibrate_intrinsics(
     )
 
 
-def _fit(dets, image_size, fisheye, fix_aspect_ratio, zero_tangent, n_radial):
+def _fit(dets, image_size, fisheye, fix_aspect_ratio, zero_tangent, n_radial, fix_principal_point=False):
     import cv2
 
     obj = [d.object_points.astype(np.float32).reshape(-1, 1, 3) for d in dets]
@@ -353,6 +363,13 @@ def _fit(dets, image_size, fisheye, fix_aspect_ratio, zero_tangent, n_radial):
         flags |= cv2.CALIB_FIX_K3
     if n_radial < 2:
         flags |= cv2.CALIB_FIX_K2
+    if n_radial < 1:
+        flags |= cv2.CALIB_FIX_K1
+    if fix_principal_point:
+        w, h = image_size
+        f0 = 1.2 * max(w, h)
+        K0 = np.array([[f0, 0, (w - 1) / 2], [0, f0, (h - 1) / 2], [0, 0, 1.0]])
+        flags |= cv2.CALIB_FIX_PRINCIPAL_POINT | cv2.CALIB_USE_INTRINSIC_GUESS
     out = cv2.calibrateCameraExtended(obj, img, tuple(image_size), K0, None, flags=flags, criteria=crit)
     _, K, D, rvecs, tvecs, std_intr = out[:6]
     return K, D.reshape(-1)[:5], rvecs, tvecs, np.asarray(std_intr, float).reshape(-1)[:4]

@@ -213,3 +213,20 @@ def test_coverage_map_and_advice():
     advice = coverage_advice(cov)
     assert "no corners" in advice and "centre" in advice
     assert coverage_advice(np.ones((3, 4), int)) == ""
+
+
+def test_focal_only_from_one_floor_view_and_fixed_centre():
+    """One tilted view of a board on the floor constrains one focal length (principal point at the
+    centre, no distortion): 490 px recovered within 1 % from 0.2 px corner noise."""
+    from calibration.synthetic import camera_ring, floor_board_pose, observe
+
+    board = Board("floor8x6", "checkerboard", 8, 6, 0.115)
+    cams = camera_ring(2, radius=3.0, height=1.5, target=(0.4, 0.3, 0.0), size=(644, 486), focal=490.0,
+                       dist=(0, 0, 0, 0, 0), principal_offset=(0, 0))
+    obs = observe(cams, board, {"floor": floor_board_pose(board)}, np.random.default_rng(3), noise_px=0.2, max_view_angle_deg=85)
+    det = obs["cam00"]["floor"]
+    res = calibrate_intrinsics([det], camera="cam00", focal_only=True)
+    assert res.fx == pytest.approx(490.0, rel=0.01) and res.fx == res.fy
+    assert (res.cx, res.cy) == (321.5, 242.5) and np.all(res.dist == 0)
+    with pytest.raises(CalibrationError, match="only 1 usable views"):
+        calibrate_intrinsics([det], camera="cam00")

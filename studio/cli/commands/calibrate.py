@@ -3,8 +3,8 @@
 Sub-commands::
 
     studio calibrate intrinsics --board B [NAME=]PATH ...      # PATH: image folder or video, one per camera
-    studio calibrate extrinsics --board B --intrinsics calibration.json NAME=FOLDER ...
-    studio calibrate floor      --board B --calibration calibration.json NAME=IMAGE ...
+    studio calibrate extrinsics --board B --intrinsics FILE NAME=FOLDER|VIDEO ...
+    studio calibrate floor      --board B --calibration calibration.json NAME=IMAGE|VIDEO ...
     studio calibrate all SESSION --board B [--floor-frames 0]  # everything from a capture session
 
 Extrinsics folders: files with the same name (after removing the camera name from it) in two
@@ -17,9 +17,6 @@ import logging
 from pathlib import Path
 
 log = logging.getLogger(__name__)
-
-IMAGE_SUFFIXES = {".png", ".jpg", ".jpeg", ".bmp", ".tif", ".tiff"}
-
 
 def register(subparsers) -> None:
     p = subparsers.add_parser(
@@ -52,8 +49,13 @@ def register(subparsers) -> None:
     qe = sub.add_parser("extrinsics", help="rig poses from board views the cameras share",
                         description="Camera poses from simultaneous board views, chained through the view graph, then bundle adjusted.")
     common(qe)
-    qe.add_argument("--intrinsics", required=True, help="calibration.json with every camera's intrinsics")
-    qe.add_argument("views", nargs="+", metavar="NAME=FOLDER", help="each camera's folder of synchronised board images")
+    qe.add_argument("--intrinsics", help="calibration file (any format studio convert reads) with every camera's intrinsics; "
+                    "without it they are estimated from the board views (see --estimate)")
+    qe.add_argument("--estimate", choices=("focal", "fixed-centre", "full"), default="focal",
+                    help="without --intrinsics: focal length only (principal point at the centre, no distortion; one "
+                         "tilted view suffices), everything but the principal point, or everything (default focal)")
+    qe.add_argument("views", nargs="+", metavar="NAME=FOLDER|VIDEO", help="each camera's folder of synchronised board images, or its video")
+    _board_view_options(qe)
     qe.add_argument("--free-intrinsics", action="store_true", help="also refine intrinsics in the bundle adjustment")
     qe.add_argument("--loss", default="soft_l1", choices=("linear", "soft_l1", "huber", "cauchy"))
     qe.add_argument("--reference", help="camera fixed at the rig origin (default: best connected)")
@@ -63,8 +65,10 @@ def register(subparsers) -> None:
                         description="Move a calibrated rig into the frame of a board lying on the floor (z up, floor z = 0).")
     common(qf)
     qf.add_argument("--calibration", required=True, help="calibration.json with the rig extrinsics")
-    qf.add_argument("views", nargs="+", metavar="NAME=IMAGE", help="each camera's image of the floor board")
+    qf.add_argument("views", nargs="+", metavar="NAME=IMAGE|VIDEO", help="each camera's image (or video) of the floor board")
     qf.add_argument("--thickness", type=float, default=0.0, help="board thickness in metres")
+    _board_view_options(qf)
+    _floor_gates(qf)
     qf.set_defaults(func=run_floor)
 
     qa = sub.add_parser("all", help="intrinsics + extrinsics + floor from a capture session",
@@ -76,11 +80,42 @@ def register(subparsers) -> None:
     qa.add_argument("--free-intrinsics", action="store_true")
     qa.add_argument("--thickness", type=float, default=0.0)
     qa.add_argument("--model", choices=("pinhole",), default="pinhole")
+    qa.add_argument("--corners", metavar="FILE", help='JSON {"camera": [x, y]}: pixel of corner 0 in every view of that '
+                    "camera (decides a symmetric board's half turn when the board never moves)")
+    _floor_gates(qa)
     qa.set_defaults(func=run_all)
     p.set_defaults(func=lambda args: (p.print_help(), 2)[1])
 
 
 # ----------------------------------------------------------------------------- helpers
+def _board_view_options(q) -> None:
+    q.add_argument("--video-frames", metavar="START:STOP[:STEP]",
+                   help="videos: the frames used (default: 5 spread over the video); frame k of every camera is one instant")
+    q.add_argument("--corners", metavar="FILE",
+                   help='JSON {"camera": [x, y]} (pixel of corner 0: decides a symmetric board\'s half turn) or '
+                        '{"camera": [[x, y] x 4]} (outer inner corners from corner 0 along its row: for boards no detector finds)')
+
+
+def _floor_gates(q) -> None:
+    q.add_argument("--max-tilt", type=float, default=3.0, help="refuse when a camera sees the floor board tilted more than this "
+                   "from the fitted floor (degrees, default 3)")
+    q.add_argument("--max-plane-mm", type=float, default=50.0, help="refuse when a camera puts the floor corners further than "
+                   "this from z = 0 (default 50 mm)")
+
+
+def _rig_table(title: str, rows: dict, columns: list[str]) -> None:
+    from rich.console import Console
+    from rich.table import Table
+
+    t = Table(title=title)
+    t.add_column("camera")
+    for c in columns:
+        t.add_column(c, justify="right")
+    for name, values in rows.items():
+        t.add_row(name, *[values.get(c, "") for c in columns])
+    Console().print(t)
+
+
 def _error(msg: str):
     from studio.cli import CommandError
 
@@ -124,15 +159,6 @@ def _progress():
     from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
 
     return Progress(TextColumn("{task.description}"), BarColumn(), MofNCompleteColumn(), TimeElapsedColumn(), transient=False)
-
-
-def _images(folder: Path) -> list[Path]:
-    if not folder.is_dir():
-        raise _error(f"{folder}: not a folder of images")
-    files = sorted(p for p in folder.iterdir() if p.suffix.lower() in IMAGE_SUFFIXES)
-    if not files:
-        raise _error(f"{folder}: no images (.png/.jpg) in this folder")
-    return files
 
 
 def _save(cameras: dict, metadata: dict, args, ground=None):
@@ -197,24 +223,6 @@ def run_intrinsics(args) -> int:
     return 0
 
 
-def _view_key(path: Path, camera: str) -> str:
-    stem = path.stem.replace(camera, "").strip("_-. ")
-    return stem or path.stem
-
-
-def _detect_views(board, specs, args, what) -> dict:
-    from calibration.detect import detect_files
-
-    out = {}
-    with _progress() as prog:
-        for name, folder in specs:
-            files = _images(folder)
-            task = prog.add_task(f"detect {name}", total=len(files))
-            dets = detect_files(files, board, max_side=args.max_side, progress=lambda k, n, task=task: prog.update(task, completed=k))
-            out[name] = {_view_key(f, name): d for f, d in zip(files, dets)}
-    return out
-
-
 def _load_rig(path: str):
     from calibration import RigCalibration
 
@@ -227,20 +235,35 @@ def _load_rig(path: str):
 def run_extrinsics(args) -> int:
     from calibration.extrinsics import calibrate_extrinsics
     from calibration.report import write_report
+    from studio.cli.commands._board_views import detect_views, load_corners
 
     board = _board(args)
-    rig = _load_rig(args.intrinsics)
     specs = [_split(s, "extrinsics views") for s in args.views]
-    unknown = [n for n, _ in specs if n not in rig.cameras]
-    if unknown:
-        raise _error(f"{args.intrinsics}: no intrinsics for cameras {unknown} (has {rig.camera_names})")
-    obs = _detect_views(board, specs, args, "extrinsics")
-    cams = {n: rig.cameras[n] for n, _ in specs}
-    ex = calibrate_extrinsics(cams, obs, reference=args.reference, free_intrinsics=args.free_intrinsics, loss=args.loss)
+    outer, hints = load_corners(args.corners)
+    if args.intrinsics:
+        rig = _load_any(args.intrinsics)
+        unknown = [n for n, _ in specs if n not in rig.cameras]
+        if unknown:
+            raise _error(f"{args.intrinsics}: no intrinsics for cameras {unknown} (has {rig.camera_names})")
+    with _progress() as prog:
+        obs = detect_views(board, specs, max_side=args.max_side, frames=args.video_frames, outer=outer, progress=prog)
+    if args.intrinsics:
+        cams = {n: rig.cameras[n] for n, _ in specs}
+        meta0 = dict(rig.metadata)
+    else:
+        cams = _estimate_intrinsics(obs, args.estimate)
+        meta0 = {"intrinsics": f"estimated from the extrinsics views ({args.estimate})"}
+    ex = calibrate_extrinsics(cams, obs, reference=args.reference, free_intrinsics=args.free_intrinsics, loss=args.loss,
+                              board=board, hints=hints)
     print(f"bundle adjustment: RMS {ex.bundle.rms_before:.3f} -> {ex.bundle.rms_after:.3f} px ({ex.bundle.method})")
-    meta = {**rig.metadata, "calibrated_by": "studio calibrate", "board": board.to_dict(),
+    rows = {n: {"views": str(sum(d.usable for d in obs[n].values())),
+                "method": ",".join(sorted({d.extra.get("method", "?") for d in obs[n].values() if d.usable})),
+                "RMS px": f"{ex.bundle.camera_rms.get(n, float('nan')):.3f}",
+                "half turn": str(ex.info.get("half_turn", {}).get(n, "-"))} for n in cams}
+    _rig_table("extrinsics", rows, ["views", "method", "RMS px", "half turn"])
+    meta = {**meta0, "calibrated_by": "studio calibrate", "board": board.to_dict(),
             "extrinsics": {"reference": ex.info["reference"], "rms_px": ex.bundle.rms_after, "camera_rms_px": ex.bundle.camera_rms,
-                           "method": ex.bundle.method},
+                           "method": ex.bundle.method, "half_turn": ex.info.get("half_turn", {})},
             "world_frame": f"camera {ex.info['reference']} (run 'studio calibrate floor' for the floor frame)"}
     _save(ex.cameras, meta, args)
     rep = write_report(_report_path(args), title="Rig extrinsics", extrinsics=ex, cameras=ex.cameras,
@@ -249,27 +272,78 @@ def run_extrinsics(args) -> int:
     return 0
 
 
+def _estimate_intrinsics(obs: dict, mode: str) -> dict:
+    from calibration.intrinsics import calibrate_intrinsics
+
+    cams = {}
+    for name, dets in obs.items():
+        r = calibrate_intrinsics(list(dets.values()), camera=name, focal_only=mode == "focal",
+                                 fix_principal_point=mode == "fixed-centre", fix_aspect_ratio=mode == "fixed-centre")
+        print(f"camera {name}: intrinsics estimated ({mode}): f {r.fx:.1f} px, RMS {r.rms:.3f} px")
+        cams[name] = r.to_camera()
+    return cams
+
+
+def _load_any(path: str):
+    from calibration import RigCalibration
+
+    try:
+        return RigCalibration.load_any(path)
+    except (OSError, ValueError) as exc:
+        raise _error(f"{path}: {exc}") from None
+
+
 def run_floor(args) -> int:
-    from calibration.detect import detect_board, read_image
     from calibration.floor import calibrate_floor
     from calibration.report import write_report
+    from studio.cli.commands._board_views import detect_views, load_corners
 
     board = _board(args)
     rig = _load_rig(args.calibration)
-    dets = {}
-    for spec in args.views:
-        name, path = _split(spec, "floor view")
+    specs = [_split(spec, "floor view") for spec in args.views]
+    for name, _ in specs:
         if name not in rig.cameras:
             raise _error(f"{args.calibration}: camera {name!r} is not calibrated (has {rig.camera_names})")
-        dets[name] = detect_board(read_image(path), board, view=path.name, max_side=args.max_side)
-        if not dets[name].usable:
+    outer, _hints = load_corners(args.corners)
+    with _progress() as prog:
+        views = detect_views(board, specs, max_side=args.max_side, frames=args.video_frames, outer=outer, progress=prog)
+    dets = {}
+    for name, per_view in views.items():
+        usable = [d for d in per_view.values() if d.usable]
+        dets[name] = usable[0] if usable else next(iter(per_view.values()))
+        if not usable:
             log.warning("camera %s: floor board not used (%s)", name, dets[name].reason)
-    fl = calibrate_floor(rig.cameras, dets, thickness=args.thickness)
-    meta = {**rig.metadata, "world_frame": "floor board (z up, floor z = 0)", "floor_check": fl.check}
+    fl = calibrate_floor(rig.cameras, dets, thickness=args.thickness, board=board,
+                         max_tilt_deg=args.max_tilt, max_plane_mm=args.max_plane_mm)
+    checks = _floor_summary(fl, board)
+    meta = {**rig.metadata, "world_frame": "floor board (z up, floor z = 0)", "floor_check": fl.check, **checks}
     _save(fl.cameras, meta, args, fl.ground)
     rep = write_report(_report_path(args), title="Floor calibration", floor=fl, cameras=fl.cameras)
     print(f"wrote {rep}")
     return 0
+
+
+def _floor_summary(fl, board) -> dict:
+    """Per-camera floor table, the scale and height checks (raise when implausible); their metadata."""
+    from calibration.rigchecks import camera_heights, scale_check
+
+    heights = camera_heights(fl.cameras, fl.ground)
+    scale = scale_check(fl.cameras, fl.placements[0], board)
+    dets = fl.placements[0]
+    rows = {}
+    for key, v in fl.check.items():  # key: camera, or camera/placement with several floor placements
+        cam = key.split("/")[0]
+        det = dets.get(cam)
+        rows[key] = {"method": det.extra.get("method", "-") if det is not None else "-", "tilt deg": f"{v['tilt_deg']:.2f}",
+                     "off plane mm": f"{v['plane_mm']:.1f}", "RMS px": f"{v['reproj_px']:.3f}", "height m": f"{heights[cam]:.3f}"}
+    _rig_table("floor", rows, ["method", "tilt deg", "off plane mm", "RMS px", "height m"])
+    if scale["ratio"] is None:
+        print(f"scale check skipped: {scale['skipped']}")
+    else:
+        print(f"scale: board squares {1000 * scale['square_m']:.1f} mm triangulated vs {1000 * board.square_size:.1f} mm "
+              f"printed (ratio {scale['ratio']:.4f})")
+    print("world z up, every camera above the floor")
+    return {"camera_heights_m": heights, "scale_check": scale}
 
 
 def run_all(args) -> int:
@@ -301,7 +375,7 @@ def run_all(args) -> int:
         task = prog.add_task("detect board", total=len(session.frame_indices))
         for k, index in enumerate(session.frame_indices):
             for cam, image in session.frame(index).items():
-                det = detect_board(image, board, view=f"{index:06d}", max_side=args.max_side)
+                det = detect_board(image, board, view=f"{index:06d}", max_side=args.max_side, robust=index in floor_frames)
                 if index in floor_frames:
                     floor[floor_frames.index(index)][cam] = det
                 obs[cam][det.view] = det  # floor views are board views too (bundle adjustment)
@@ -313,12 +387,17 @@ def run_all(args) -> int:
     else:
         results = {c: calibrate_intrinsics(list(obs[c].values()), camera=c) for c in session.cameras}
         cams = {c: r.to_camera() for c, r in results.items()}
-    ex = calibrate_extrinsics(cams, obs, free_intrinsics=args.free_intrinsics)
-    fl = calibrate_floor(ex.cameras, floor, thickness=args.thickness)
+    from studio.cli.commands._board_views import load_corners
+
+    _outer, hints = load_corners(args.corners)
+    ex = calibrate_extrinsics(cams, obs, free_intrinsics=args.free_intrinsics, board=board, hints=hints)
+    fl = calibrate_floor(ex.cameras, floor, thickness=args.thickness, board=board, max_tilt_deg=args.max_tilt,
+                         max_plane_mm=args.max_plane_mm)
     if results:
         _intrinsics_table(results)
     print(f"bundle adjustment: RMS {ex.bundle.rms_before:.3f} -> {ex.bundle.rms_after:.3f} px")
-    meta = {**(_metadata_intrinsics(board, results) if results else {"calibrated_by": "studio calibrate", "board": board.to_dict()}),
+    checks = _floor_summary(fl, board)
+    meta = {**checks, **(_metadata_intrinsics(board, results) if results else {"calibrated_by": "studio calibrate", "board": board.to_dict()}),
             "session": str(args.session),
             "extrinsics": {"reference": ex.info["reference"], "rms_px": ex.bundle.rms_after, "camera_rms_px": ex.bundle.camera_rms,
                            "method": ex.bundle.method},

@@ -224,22 +224,6 @@ def bench_stereo(data: Path) -> dict:
     }
 
 
-def _uu_config(folder: Path, name: str):
-    """Intrinsics and the reference pose (metres) from a UU ``config.xml`` (cv2.FileStorage)."""
-    import cv2
-
-    from calibration import Camera
-
-    fs = cv2.FileStorage(str(folder / "config.xml"), cv2.FILE_STORAGE_READ)
-    K = fs.getNode("CameraMatrix").mat().astype(float)
-    dist = fs.getNode("DistortionCoeffs").mat().astype(float).ravel()
-    R = cv2.Rodrigues(fs.getNode("Rotation").mat().astype(float).ravel())[0]
-    t = fs.getNode("Translation").mat().astype(float).ravel() / 1000.0
-    fs.release()
-    intr = Camera(name, K, dist, np.eye(3), np.zeros(3), (644, 486))
-    return intr, intr.replace(R=R, t=t)
-
-
 def bench_uu(data: Path, step: int = 5) -> dict:
     """Detection rate per camera and method over every ``step``-th board frame; extrinsics + floor with config.xml intrinsics."""
     import itertools
@@ -254,8 +238,10 @@ def bench_uu(data: Path, step: int = 5) -> dict:
     root = data / "multiview" / "uu_infomcv_4cam_person"
     board = Board("uu_floor_8x6", "checkerboard", 8, 6, 0.115)
     names = ["cam1", "cam2", "cam3", "cam4"]
-    cams = {n: _uu_config(root / n, n) for n in names}
-    intr, ref = {n: c[0] for n, c in cams.items()}, {n: c[1] for n, c in cams.items()}
+    from calibration import RigCalibration
+
+    ref = {n: c for n, c in RigCalibration.load_any(root).cameras.items() if n in names}  # metres, Z up
+    intr = {n: c.replace(R=np.eye(3), t=np.zeros(3)) for n, c in ref.items()}
     rates, obs = {}, {n: {} for n in names}
     for n in names:
         plain = robust = 0

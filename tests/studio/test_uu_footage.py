@@ -11,8 +11,8 @@ chairs and tripods agree with ours: cameras ~1.4 m high). So the test asserts wh
 vouch for — which end of the symmetric board is corner 0, relative rotations within 6 deg — and
 checks our own geometry against the board itself (triangulated square size, tilt, heights).
 
-The intrinsics are read from ``config.xml`` with ``cv2.FileStorage`` in :func:`uu_camera` (a reader
-of per-camera OpenCV XML files is being added to ``calibration.formats`` separately; switch to it).
+The intrinsics and the reference poses are the course's ``config.xml`` files read by the toolkit's
+per-camera reader (:func:`uu_cameras`).
 The corner-0 hints stand in for a user clicking corner 0 in each view: the reference's projection of
 corner 0, which lands within ~10 px of it (a half turn would put it ~150 px away).
 """
@@ -33,18 +33,12 @@ CAMS = ("cam1", "cam2", "cam3", "cam4")
 BOARD_YAML = "name: uu_floor_8x6\nkind: checkerboard\ninner_corners: [8, 6]\nsquare_size: 0.115\n"
 
 
-def uu_camera(folder, name: str) -> tuple[Camera, Camera]:
-    """``(intrinsics only, reference pose in metres)`` from ``<folder>/config.xml``."""
-    import cv2
-
-    fs = cv2.FileStorage(str(folder / "config.xml"), cv2.FILE_STORAGE_READ)
-    K = fs.getNode("CameraMatrix").mat().astype(float)
-    dist = fs.getNode("DistortionCoeffs").mat().astype(float).ravel()
-    rvec = fs.getNode("Rotation").mat().astype(float).ravel()
-    t = fs.getNode("Translation").mat().astype(float).ravel() / 1000.0  # the file is in millimetres
-    fs.release()
-    intr = Camera(name, K, dist, np.eye(3), np.zeros(3), (644, 486))
-    return intr, intr.replace(R=cv2.Rodrigues(rvec)[0], t=t)
+def uu_cameras(root) -> dict[str, tuple[Camera, Camera]]:
+    """Per camera ``(intrinsics only, reference pose in metres)`` from the course's
+    ``<cam>/config.xml`` files, read by the toolkit's own reader (millimetres and the Z-down
+    world detected and fixed; relative poses and projections unchanged)."""
+    ref = RigCalibration.load_any(root)
+    return {n: (c.replace(R=np.eye(3), t=np.zeros(3)), c) for n, c in ref.cameras.items() if n in CAMS}
 
 
 @pytest.fixture(scope="module")
@@ -53,7 +47,7 @@ def uu(shared_data, tmp_path_factory):
     if not root.is_dir():
         pytest.skip(f"{root} not found")
     tmp = tmp_path_factory.mktemp("uu")
-    cams = {n: uu_camera(root / n, n) for n in CAMS}
+    cams = uu_cameras(root)
     RigCalibration({n: c[0] for n, c in cams.items()}).save(tmp / "intrinsics.json")
     (tmp / "board.yaml").write_text(BOARD_YAML)
     corner0 = np.array([[0.0, 0.0, 0.0]])

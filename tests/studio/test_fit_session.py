@@ -155,7 +155,7 @@ def test_an_all_person_frame_is_refused_never_measured(tmp_path, capsys):
 
 
 def test_rerun_keeps_frames_fitted_with_the_same_settings(tmp_path, monkeypatch):
-    import studio.fit.session as fs
+    import studio.fit.units as fs
 
     make_session(tmp_path / "s", n_frames=3)
     first = fit_session(tmp_path / "s", gender="female", options=TINY, seed=0)
@@ -181,7 +181,7 @@ def test_rerun_keeps_frames_fitted_with_the_same_settings(tmp_path, monkeypatch)
 
 
 def test_unwritable_fit_folder_fails_before_any_work(tmp_path, monkeypatch):
-    import studio.fit.session as fs
+    import studio.fit.units as fs
 
     make_session(tmp_path / "s", n_frames=1)
     (tmp_path / "s" / "fit").write_text("not a folder")

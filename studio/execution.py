@@ -152,15 +152,20 @@ def run_chains(runner: Runner, fn: Callable, chains: Sequence[Sequence], *, spec
         if chain:
             pending[runner.submit(fn, spec, chain[0], starts[i])] = i
     finished = done
-    while pending:
-        for fut in runner.first_completed(list(pending)):
-            i = pending.pop(fut)
-            value = fut.result()
-            results[i].append(value)
-            finished += 1
-            if progress:
-                progress(finished, total)
-            k = len(results[i])
-            if k < len(chains[i]):
-                pending[runner.submit(fn, spec, chains[i][k], value)] = i
+    try:
+        while pending:
+            for fut in runner.first_completed(list(pending)):
+                i = pending.pop(fut)
+                value = fut.result()
+                results[i].append(value)
+                finished += 1
+                if progress:
+                    progress(finished, total)
+                k = len(results[i])
+                if k < len(chains[i]):
+                    pending[runner.submit(fn, spec, chains[i][k], value)] = i
+    except BaseException:
+        for fut in pending:  # queued units are dropped; running local ones stop with their pool
+            fut.cancel()
+        raise
     return results

@@ -11,7 +11,7 @@ import distributed
 
 from studio.execution import ExecutionError, Runner, worker_setup
 
-__all__ = ["DASK_RETRIES", "WorkerSetup", "dask_runner"]
+__all__ = ["DASK_RETRIES", "WorkerSetup", "dask_runner", "local_cluster"]
 
 log = logging.getLogger(__name__)
 
@@ -31,24 +31,27 @@ class WorkerSetup(distributed.WorkerPlugin):
 
 
 @contextlib.contextmanager
+def local_cluster(n_workers: int) -> Iterator[str]:
+    """A ``LocalCluster`` of ``n_workers`` single-threaded processes on the loopback interface,
+    its workers tied to this process (they are its children); yields the scheduler address."""
+    with distributed.LocalCluster(n_workers=int(n_workers), threads_per_worker=1, processes=True, host="127.0.0.1",
+                                  dashboard_address=None, silence_logs=logging.ERROR) as cluster, \
+            distributed.Client(cluster, set_as_default=False) as client:
+        client.register_plugin(WorkerSetup(die_with_parent=True), name="studio-worker-tied")
+        yield cluster.scheduler_address
+
+
+@contextlib.contextmanager
 def dask_runner(kind: str, value, *, timeout: float = 30.0) -> Iterator[Runner]:
-    """A :class:`~studio.execution.Runner` on a ``LocalCluster`` of ``value`` processes
-    (``kind`` "local", loopback only, closed on exit) or the scheduler at address ``value``."""
+    """A :class:`~studio.execution.Runner` on a :func:`local_cluster` of ``value`` processes
+    (``kind`` "local", closed on exit) or on the scheduler at address ``value``."""
     with contextlib.ExitStack() as stack:
-        local = kind == "local"
-        if local:
-            cluster = stack.enter_context(distributed.LocalCluster(
-                n_workers=int(value), threads_per_worker=1, processes=True, host="127.0.0.1",
-                dashboard_address=None, silence_logs=logging.ERROR))
-            address = cluster.scheduler_address
-        else:
-            address = value
+        address = stack.enter_context(local_cluster(value)) if kind == "local" else value
         try:
             client = stack.enter_context(distributed.Client(address, timeout=timeout, set_as_default=False))
         except OSError as exc:
             raise ExecutionError(f"--scheduler {address}: cannot reach the Dask scheduler ({exc})") from None
-        # a LocalCluster's workers are our children: tied to us; a remote worker has its own life
-        client.register_plugin(WorkerSetup(die_with_parent=local), name="studio-worker-setup")
+        client.register_plugin(WorkerSetup(die_with_parent=False), name="studio-worker-setup")
         if not client.scheduler_info()["workers"]:
             try:
                 client.wait_for_workers(1, timeout=timeout)

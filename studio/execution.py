@@ -31,7 +31,8 @@ from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass
 from typing import Any
 
-__all__ = ["ExecutionError", "Runner", "open_runner", "parse_scheduler", "run_chains", "worker_setup"]
+__all__ = ["ExecutionError", "Runner", "open_runner", "parse_scheduler", "run_chains", "shared_scheduler",
+           "worker_setup"]
 
 log = logging.getLogger(__name__)
 
@@ -108,6 +109,27 @@ def _wait_local(futures) -> set:
     return done
 
 
+def _dask():
+    try:
+        import studio._dask as dask_side
+    except ImportError:
+        raise ExecutionError("--scheduler needs Dask: pip install 'silhouette-shadow-studio[dask]' "
+                             "(or pip install 'dask[distributed]')") from None
+    return dask_side
+
+
+@contextlib.contextmanager
+def shared_scheduler(scheduler: str | None) -> Iterator[str | None]:
+    """For many runs in a row (a study): ``local:N`` becomes one ``LocalCluster`` started here and
+    closed on exit (its ``tcp://`` address yielded); ``None`` and addresses are yielded as given."""
+    parsed = parse_scheduler(scheduler)
+    if parsed is None or parsed[0] == "address":
+        yield scheduler
+        return
+    with _dask().local_cluster(parsed[1]) as address:
+        yield address
+
+
 @contextlib.contextmanager
 def open_runner(workers: int = 1, scheduler: str | None = None, *, timeout: float = 30.0) -> Iterator[Runner]:
     """A :class:`Runner`: this process (``workers`` 1), ``workers`` local processes, or the Dask
@@ -117,12 +139,7 @@ def open_runner(workers: int = 1, scheduler: str | None = None, *, timeout: floa
 
     parsed = parse_scheduler(scheduler)
     if parsed is not None:
-        try:
-            from studio._dask import dask_runner
-        except ImportError:
-            raise ExecutionError("--scheduler needs Dask: pip install 'silhouette-shadow-studio[dask]' "
-                                 "(or pip install 'dask[distributed]')") from None
-        with dask_runner(*parsed, timeout=timeout) as runner:
+        with _dask().dask_runner(*parsed, timeout=timeout) as runner:
             yield runner
         return
     if isinstance(workers, bool) or not isinstance(workers, int) or workers < 1:

@@ -3,16 +3,18 @@
 
 Plan of :func:`fit_session`:
 
-1. The requested frames are cut into ``chains`` contiguous runs (default: one per worker). A
-   chain's first frame is fitted from its silhouettes alone with the shape free; each next frame
-   of the chain starts from the previous frame's pose and the chain's shape with a smaller
+1. The requested frames are cut into contiguous **chains** of at most ``chain_length`` frames
+   (near-equal lengths; :func:`plan_chains`). A chain's first frame is fitted from its
+   silhouettes alone with the shape free; each next frame of the chain starts from the previous frame's pose and the chain's shape with a smaller
    spread (tracking), as the unit of :mod:`studio.fit.units` describes. The **key frame** is the
    first fitted frame of the first chain; with ``gender="auto"`` it is fitted with both models
    first (§4.7.2) and every chain then uses the chosen one.
 2. The units run on a runner of :mod:`studio.execution`: in this process (``workers=1``), in
    ``workers`` local processes, or on a Dask cluster (``scheduler="tcp://HOST:PORT"`` or
-   ``"local:N"``). The plan depends only on the frames and ``chains``, never on who runs it, so
-   the same seed gives the same results everywhere.
+   ``"local:N"``). The plan depends only on the frames and ``chain_length``, never on who runs
+   it or how many workers there are, so the same seed gives the same results everywhere. Chains
+   trade work for parallelism: a chain's first frame costs a broad search (~2× a tracked frame),
+   one chain of 24 frames has one, four chains of 6 have four but run on four workers at once.
 3. Each frame writes ``fit/NNNNNN.ply`` and ``fit/overlay/<cam>/NNNNNN.png``, then
    ``fit/NNNNNN.json`` (shape, pose, per-term costs, joints, timings, settings) last: a frame
    whose JSON exists is complete. The session's shape is the mean of the per-frame estimates
@@ -37,7 +39,7 @@ from studio.fit.frame import FitOptions, FrameFit
 from studio.fit.quality import summary_line
 from studio.fit.units import fit_unit, stored_fit
 
-__all__ = ["fit_session", "load_fits", "load_quality", "open_workspace", "plan_chains"]
+__all__ = ["CHAIN_LENGTH", "fit_session", "load_fits", "load_quality", "open_workspace", "plan_chains"]
 
 log = logging.getLogger(__name__)
 
@@ -56,13 +58,20 @@ def open_workspace(source, out=None):
     return ws
 
 
-def plan_chains(frames: list[int], chains: int) -> list[list[int]]:
-    """``frames`` cut into ``chains`` contiguous runs of near-equal length (none empty).
+#: Default longest chain of tracked frames (:func:`plan_chains`).
+CHAIN_LENGTH = 6
 
-    >>> plan_chains([0, 6, 12, 18, 21], 2)
+
+def plan_chains(frames: list[int], chain_length: int = CHAIN_LENGTH) -> list[list[int]]:
+    """``frames`` cut into the fewest contiguous chains of at most ``chain_length`` frames, of
+    near-equal lengths.
+
+    >>> plan_chains(list(range(8)), 6)
+    [[0, 1, 2, 3], [4, 5, 6, 7]]
+    >>> plan_chains([0, 6, 12, 18, 21], 3)
     [[0, 6, 12], [18, 21]]
     """
-    n = max(1, min(int(chains), len(frames)))
+    n = max(1, -(-len(frames) // int(chain_length)))
     return [[int(f) for f in c] for c in np.array_split(np.asarray(frames, dtype=int), n) if len(c)]
 
 
@@ -89,7 +98,7 @@ def fit_session(
     gender: str = "auto",
     workers: int = 1,
     scheduler: str | None = None,
-    chains: int | None = None,
+    chain_length: int = CHAIN_LENGTH,
     options: FitOptions = FitOptions(),
     seed: int = 0,
     progress: Callable[[int, int], None] | None = None,
@@ -100,8 +109,8 @@ def fit_session(
     folder; outputs to ``out``, default the session); returns the summary dict (also written
     to ``fit/sequence.json``). Frames fitted before with the same settings are kept unless
     ``force``. ``workers`` local processes, or the Dask cluster ``scheduler`` (see
-    :func:`studio.execution.open_runner`); ``chains`` tracked runs (default: ``workers``, or the
-    cluster's worker threads)."""
+    :func:`studio.execution.open_runner`); ``chain_length`` the longest chain of tracked frames
+    (:func:`plan_chains`; part of the settings a rerun compares)."""
     from rigs.atomic import atomic_write_json
     from studio.body import GENDERS
     from studio.execution import ExecutionError, open_runner, run_chains
@@ -109,7 +118,7 @@ def fit_session(
 
     if gender != "auto" and gender not in GENDERS:
         raise FitError(f"gender: expected 'auto' or one of {', '.join(GENDERS)}, got {gender!r}")
-    for name, value in (("workers", workers), ("chains", 1 if chains is None else chains)):
+    for name, value in (("workers", workers), ("chain_length", chain_length)):
         if isinstance(value, bool) or not isinstance(value, int) or value < 1:
             raise FitError(f"{name}: expected an integer >= 1, got {value!r}")
     ws = open_workspace(source, out)
@@ -125,6 +134,9 @@ def fit_session(
     t0 = time.perf_counter()
     total = len(frames)
     run = {"gender": gender, "seed": int(seed), "key_frame": frames[0], "options": options.to_dict()}
+    plan = plan_chains(frames, chain_length)
+    if len(plan) > 1:  # recorded only when it splits: results of one chain keep their old settings
+        run["chains"] = plan
     kept = [] if force else [f for f in frames if stored_fit(ws.layout, f, run) is not None]
     if force:  # a frame's JSON marks it complete: gone, so that every unit fits again
         for f in frames:
@@ -135,8 +147,7 @@ def fit_session(
     spec = {"path": str(ws.path), "out": str(ws.layout.root), "gender": gender, "options": options.to_dict(),
             "seed": int(seed), "run": run}
     try:
-        with open_runner(workers, scheduler) as runner:
-            plan = plan_chains(frames, chains or runner.workers)
+        with open_runner(min(workers, len(plan)), scheduler) as runner:
             todo = [list(c) for c in plan]
             starts = [None] * len(todo)
             states = []

@@ -105,7 +105,7 @@ def write_study_report(layout, spec, rows: list[dict]):
         "<h2>Against ANSUR II</h2>" + (
             f"<p>Black: the ANSUR II population (normal density from its mean and SD; grey: 1st–99th "
             f"percentile). Marks: participants (red: that measurement is flagged).</p>"
-            f"<img src='data:image/png;base64,{fig}'>" if fig else "<p>No participant was measured.</p>"),
+            f"<img src='{fig}'>" if fig else "<p>No participant was measured.</p>"),
         "<h2>Flagged participants</h2>" + ("<ul>" + "".join(
             f"<li><b>{_esc(r['participant'])}</b>: {_esc(r['flags'])}</li>" for r in flagged) + "</ul>"
             if flagged else "<p>None.</p>"),

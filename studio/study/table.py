@@ -41,6 +41,7 @@ def participant_row(participant: str, session, entry: dict, folder) -> dict:
     statuses = set(seq.get("quality", {}).values()) - {"ok"}
     if statuses:
         flags.append(f"frames: {seq.get('quality_summary')}")
+    by_reason: dict[str, list[str]] = {}  # one line per reason, naming every measurement it affects
     for name in REPORTED:
         r = table[name]
         u = UNITS[name]
@@ -49,7 +50,8 @@ def participant_row(participant: str, session, entry: dict, folder) -> dict:
         row[f"{name}_status"] = r.get("status", "ok")
         row[f"{name}_z"] = r.get("population_z")
         if r.get("status", "ok") != "ok":
-            flags.append(f"{name}: {'; '.join(r.get('flags', [])) or r['status']}")
+            by_reason.setdefault("; ".join(r.get("flags", [])) or r["status"], []).append(name)
+    flags += [f"{', '.join(names)}: {reason}" for reason, names in by_reason.items()]
     row.update(gender=seq.get("gender"), frames=len(seq.get("costs", {})), quality=seq.get("quality_summary"),
                flagged=bool(flags), flags=" | ".join(flags))
     return row

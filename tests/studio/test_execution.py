@@ -46,7 +46,7 @@ def local_fit(tmp_path_factory):
     root = tmp_path_factory.mktemp("exec")
     make_session(root / "clean", n_frames=FRAMES)
     shutil.copytree(root / "clean", root / "local")
-    summary = fit_session(root / "local", gender="female", options=TINY, workers=2)
+    summary = fit_session(root / "local", gender="female", options=TINY, workers=2, chain_length=2)
     assert summary["chains"] == [[0, 1], [2, 3]] and summary["executor"] == "2 local processes"
     return root, _results(root / "local")
 
@@ -83,8 +83,8 @@ def test_chains_pass_each_result_to_the_next_unit():
 
 
 def test_a_local_cluster_fits_and_segments_exactly_as_local_processes(local_fit, tmp_path):
-    """2-worker LocalCluster vs 2 local processes: every frame's shape, pose, joints, costs and
-    quality bit for bit; segmentation labels too."""
+    """2-worker LocalCluster, 2 local processes and this process alone: every frame's shape, pose,
+    joints, costs and quality bit for bit; segmentation labels too."""
     from rigs.imageio import read_image
     from studio.segment import SegmentOptions, segment_session
     from studio.segment.synthetic import write_session
@@ -92,11 +92,14 @@ def test_a_local_cluster_fits_and_segments_exactly_as_local_processes(local_fit,
     root, reference = local_fit
     session = _fresh(root, "local-cluster")
     done = []
-    summary = fit_session(session, gender="female", options=TINY, scheduler="local:2",
+    summary = fit_session(session, gender="female", options=TINY, scheduler="local:2", chain_length=2,
                           progress=lambda d, n: done.append(d))
     assert summary["executor"].startswith("dask tcp://127.0.0.1:") and summary["chains"] == [[0, 1], [2, 3]]
     assert done == [1, 2, 3, 4]
     _assert_same(_results(session), reference)
+    serial = _fresh(root, "serial")  # the plan does not depend on the runner: one process, same files
+    assert fit_session(serial, gender="female", options=TINY, workers=1, chain_length=2)["executor"] == "this process"
+    _assert_same(_results(serial), reference)
     # frames as independent units: labels from the cluster equal those of this process
     a = write_session(tmp_path / "a", size=(96, 72), frames=4)
     b = write_session(tmp_path / "b", size=(96, 72), frames=4)
@@ -120,23 +123,29 @@ def _kill_one_busy_worker(client, killed: list, stop: threading.Event) -> None:
         time.sleep(0.05)
 
 
-def test_a_killed_dask_worker_loses_only_its_frame(local_fit):
+@pytest.fixture(scope="module")
+def cluster():
+    """A LocalCluster of 2 worker processes on 127.0.0.1 and a client of it (closed after the module)."""
+    with distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True, host="127.0.0.1",
+                                  dashboard_address=None) as c, distributed.Client(c, set_as_default=False) as client:
+        yield c, client
+
+
+def test_a_killed_dask_worker_loses_only_its_frame(local_fit, cluster):
     """SIGKILL one of two workers in the middle of a frame: the scheduler runs that frame again
     on a worker (the nanny's replacement or the other); every frame is there once, as if nothing
     had happened."""
     root, reference = local_fit
     session = _fresh(root, "killed")
     killed, stop = [], threading.Event()
-    with distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True, host="127.0.0.1",
-                                  dashboard_address=None) as cluster, \
-            distributed.Client(cluster, set_as_default=False) as client:
-        killer = threading.Thread(target=_kill_one_busy_worker, args=(client, killed, stop))
-        killer.start()
-        try:
-            summary = fit_session(session, gender="female", options=TINY, scheduler=cluster.scheduler_address)
-        finally:
-            stop.set()
-            killer.join(timeout=10)
+    lc, client = cluster
+    killer = threading.Thread(target=_kill_one_busy_worker, args=(client, killed, stop))
+    killer.start()
+    try:
+        summary = fit_session(session, gender="female", options=TINY, scheduler=lc.scheduler_address, chain_length=2)
+    finally:
+        stop.set()
+        killer.join(timeout=10)
     assert len(killed) == 1, "no worker was busy long enough to be killed"
     assert summary["frames"] == list(range(FRAMES))
     names = sorted(p.name for p in (session / "fit").glob("[0-9]*.json"))
@@ -188,7 +197,8 @@ def test_studio_fit_on_a_dask_scheduler_and_two_workers(local_fit, tmp_path, cap
         old = fit_cmd.QUICK
         fit_cmd.QUICK = quick
         try:
-            code = main(["fit", str(session), "--gender", "female", "--quick", "--scheduler", address])
+            code = main(["fit", str(session), "--gender", "female", "--quick", "--scheduler", address,
+                         "--chain-length", "2"])
         finally:
             fit_cmd.QUICK = old
         out = capsys.readouterr().out
@@ -203,13 +213,67 @@ def test_studio_fit_on_a_dask_scheduler_and_two_workers(local_fit, tmp_path, cap
     assert "expected a Dask scheduler address tcp://HOST:PORT" in capsys.readouterr().err
 
 
-def test_a_failing_unit_names_its_frame_through_the_cluster(local_fit):
+def test_a_failing_unit_names_its_frame_through_the_cluster(local_fit, cluster):
     root, _ = local_fit
     session = _fresh(root, "broken")
     (session / "segmentation" / "cam1" / "000002.png").write_bytes(b"not a png")
     t0 = time.monotonic()
     with pytest.raises(Exception, match="000002"):
-        fit_session(session, gender="female", options=TINY, scheduler="local:2")
+        fit_session(session, gender="female", options=TINY, scheduler=cluster[0].scheduler_address, chain_length=2)
     print(f"failed and cluster closed in {time.monotonic() - t0:.1f} s")
     with pytest.raises(FitError, match="workers: expected an integer >= 1"):
         fit_session(session, gender="female", workers=0)
+    with pytest.raises(FitError, match="chain_length: expected an integer >= 1"):
+        fit_session(session, gender="female", chain_length=0)
+
+
+def _descendants(pid: int) -> set[int]:
+    out, todo = set(), [pid]
+    while todo:
+        p = todo.pop()
+        kids = []
+        for task in Path(f"/proc/{p}/task").glob("*"):  # children of every thread (Dask spawns from its own)
+            try:
+                kids += [int(v) for v in (task / "children").read_text().split()]
+            except (FileNotFoundError, ProcessLookupError):
+                continue
+        out |= set(kids)
+        todo += kids
+    return out
+
+
+def _alive(pid: int) -> bool:
+    try:
+        return Path(f"/proc/{pid}/stat").read_text().split(") ")[1][0] != "Z"
+    except FileNotFoundError:
+        return False
+
+
+@pytest.mark.skipif(not sys.platform.startswith("linux"), reason="reads /proc")
+def test_local_cluster_workers_die_with_a_killed_command(local_fit):
+    """``studio fit --scheduler local:2`` SIGKILLed mid-fit: its cluster's worker processes are gone
+    within 5 s (the worker plugin ties them to the command, as local worker pools are)."""
+    root, _ = local_fit
+    session = _fresh(root, "killed-parent")
+    proc = subprocess.Popen([sys.executable, "-m", "studio", "fit", str(session), "--gender", "female", "--quick",
+                             "--scheduler", "local:2", "--chain-length", "2"],
+                            stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    seen: set[int] = set()
+    t0 = time.monotonic()
+    while time.monotonic() - t0 < 60 and len(seen) < 2:  # the cluster's two workers are up
+        seen |= _descendants(proc.pid)
+        assert proc.poll() is None, "the fit ended before it could be killed"
+        time.sleep(0.05)
+    time.sleep(1.0)
+    seen |= _descendants(proc.pid)
+    assert len(seen) >= 2, f"no worker processes seen ({seen})"
+    os.kill(proc.pid, signal.SIGKILL)
+    proc.wait(timeout=10)
+    t_kill = time.monotonic()
+    while any(_alive(p) for p in seen) and time.monotonic() - t_kill < 10:
+        time.sleep(0.05)
+    gone = time.monotonic() - t_kill
+    leftover = [p for p in seen if _alive(p)]
+    for p in leftover:  # never leave them behind, even when the test fails
+        os.kill(p, signal.SIGKILL)
+    assert not leftover and gone < 5.0, f"processes {leftover} alive {gone:.1f} s after the command was killed"

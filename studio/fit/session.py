@@ -4,11 +4,13 @@
 Plan of :func:`fit_session`:
 
 1. The requested frames are cut into contiguous **chains** of at most ``chain_length`` frames
-   (near-equal lengths; :func:`plan_chains`). A chain's first frame is fitted from its
-   silhouettes alone with the shape free; each next frame of the chain starts from the previous frame's pose and the chain's shape with a smaller
-   spread (tracking), as the unit of :mod:`studio.fit.units` describes. The **key frame** is the
-   first fitted frame of the first chain; with ``gender="auto"`` it is fitted with both models
-   first (§4.7.2) and every chain then uses the chosen one.
+   (near-equal lengths), and wherever two frames are too far apart to track
+   (:func:`plan_chains`). A chain's first frame is fitted from its silhouettes alone with the
+   shape free; each next frame of the chain starts from the previous frame's pose and the
+   chain's shape with a smaller spread (tracking), as the unit of :mod:`studio.fit.units`
+   describes. The **key frame** is the first fitted frame of the first chain; with
+   ``gender="auto"`` it is fitted with both models first (§4.7.2) and every chain then uses
+   the chosen one.
 2. The units run on a runner of :mod:`studio.execution`: in this process (``workers=1``), in
    ``workers`` local processes, or on a Dask cluster (``scheduler="tcp://HOST:PORT"`` or
    ``"local:N"``). The plan depends only on the frames and ``chain_length``, never on who runs
@@ -37,7 +39,7 @@ import numpy as np
 from studio.fit.errors import FitError
 from studio.fit.frame import FitOptions, FrameFit
 from studio.fit.quality import summary_line
-from studio.fit.units import fit_unit, stored_fit
+from studio.fit.units import MAX_TRACK_GAP, fit_unit, stored_fit
 
 __all__ = ["CHAIN_LENGTH", "fit_session", "load_fits", "load_quality", "open_workspace", "plan_chains"]
 
@@ -63,16 +65,27 @@ CHAIN_LENGTH = 6
 
 
 def plan_chains(frames: list[int], chain_length: int = CHAIN_LENGTH) -> list[list[int]]:
-    """``frames`` cut into the fewest contiguous chains of at most ``chain_length`` frames, of
-    near-equal lengths.
+    """``frames`` (in the order given) cut into chains: first wherever the next frame is more
+    than ``MAX_TRACK_GAP`` away (it could not be tracked anyway), then each run into the fewest
+    chains of at most ``chain_length`` frames, of near-equal lengths.
 
     >>> plan_chains(list(range(8)), 6)
     [[0, 1, 2, 3], [4, 5, 6, 7]]
-    >>> plan_chains([0, 6, 12, 18, 21], 3)
-    [[0, 6, 12], [18, 21]]
+    >>> plan_chains([0, 6, 12, 13, 14, 15], 3)
+    [[0], [6], [12, 13], [14, 15]]
     """
-    n = max(1, -(-len(frames) // int(chain_length)))
-    return [[int(f) for f in c] for c in np.array_split(np.asarray(frames, dtype=int), n) if len(c)]
+    runs, run = [], []
+    for f in frames:
+        if run and abs(int(f) - run[-1]) > MAX_TRACK_GAP:
+            runs.append(run)
+            run = []
+        run.append(int(f))
+    runs.append(run)
+    out = []
+    for run in runs:
+        n = -(-len(run) // int(chain_length))
+        out += [[int(f) for f in c] for c in np.array_split(np.asarray(run, dtype=int), n) if len(c)]
+    return out
 
 
 def _key_first(runner, spec: dict, chains: list[list[int]], starts: list, progress, total: int) -> tuple[list, dict]:

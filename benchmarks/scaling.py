@@ -26,6 +26,8 @@ import tempfile
 import time
 from pathlib import Path
 
+import numpy as np
+
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
@@ -95,15 +97,16 @@ def main(argv=None) -> int:
                   flush=True)
     finally:
         shutil.rmtree(tmp, ignore_errors=True)
-    same = all(outputs["2 local workers"][f][k] == outputs["Dask LocalCluster, 2 workers"][f][k]
-               for f in frames for k in ("shape", "pose", "costs"))
+    # the same plan everywhere: the same poses and shapes (up to last-bit float noise)
+    same = max(float(np.max(np.abs(np.subtract(outputs[n][f][k], outputs["1 local worker"][f][k]))))
+               for n in outputs for f in frames for k in ("shape", "pose"))
     base = res["runs"]["1 local worker"]["wall_s"]
     one = res["runs"]["1 local worker"]
     heads = {c[0] for c in one["chains"]}
     starts = [v for f, v in one["frame_s"].items() if int(f) in heads]
     tracked = [v for f, v in one["frame_s"].items() if int(f) not in heads]
     t_start, t_track = sum(starts) / len(starts), sum(tracked) / max(len(tracked), 1)
-    res.update(identical_local_and_dask=same, t_start_s=round(t_start, 2), t_track_s=round(t_track, 2),
+    res.update(max_pose_shape_difference=same, t_start_s=round(t_start, 2), t_track_s=round(t_track, 2),
                segment_s_per_frame=round(t_segment, 3),
                estimate_100_participants=_estimate(t_start, t_track, t_segment, args.per_participant,
                                                    args.chain_length),
@@ -116,7 +119,7 @@ def main(argv=None) -> int:
         print(f"  {name:30s} {r['wall_s']:8.1f} {r['frames_per_hour']:9.1f} {r['speedup']:8.2f}×")
     ok = all(r["speedup"] >= TARGET for n, r in res["runs"].items() if "2" in n)
     print(f"  target ≥ {TARGET}× with 2 workers (anchor: ideal 2×): {'OK' if ok else 'MISSED'}; "
-          f"2 local processes and the Dask cluster give identical fits: {same}")
+          f"largest difference in pose or shape between the runners: {same:.1e}")
     print(f"\nestimate: 100 participants × {args.per_participant} frames in chains of ≤ {args.chain_length}, from "
           f"t_start {t_start:.1f} s, t_track {t_track:.1f} s per frame, segmentation {t_segment:.2f} s per frame "
           f"(2 processes), ~5 s report:")

@@ -36,6 +36,7 @@ __all__ = ["ExecutionError", "Runner", "open_runner", "parse_scheduler", "run_ch
 
 log = logging.getLogger(__name__)
 
+
 class ExecutionError(RuntimeError):
     """A runner cannot be set up as asked (bad scheduler address, Dask missing, no workers)."""
 

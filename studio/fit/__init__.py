@@ -2,7 +2,8 @@
 
 - :func:`fit_frame` / :func:`fit_frame_gender`: one frame (particle filter, then staged
   Nelder–Mead, coarse-to-fine pyramid levels), gender given or chosen by the lower cost;
-- :func:`fit_session`: a sequence, frames in parallel processes, shape shared;
+- :func:`fit_session`: a sequence, frames as units on local processes or a Dask cluster
+  (:mod:`studio.fit.units`, :mod:`studio.execution`), chains of tracked frames;
 - :mod:`studio.fit.quality`: the quality gates every fitted frame carries (status ok /
   suspect / failed with reasons);
 - :mod:`studio.fit.evaluate`: accuracy against a simulated session's truth.

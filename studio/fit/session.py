@@ -1,24 +1,30 @@
-"""Fitting a capture session: frames in parallel processes, shape shared (thesis §4.7, §4.8.6).
+"""Fitting a capture session: frames as units of work, chains of tracked frames side by side
+(thesis §4.7, §4.8.6).
 
 Plan of :func:`fit_session`:
 
-1. The **key frame** (the first requested frame) is fitted from the silhouettes alone with the
-   shape free (and the gender chosen by fitting both models when ``gender="auto"``, §4.7.2).
-2. Its shape **starts** every other frame's fit (one person per session); each frame refines
-   it, and the session's shape is the mean of the per-frame estimates (their spread is the
-   measurement spread of §4.8.6). The remaining frames are cut into ``workers`` contiguous chunks fitted in parallel processes. The first
-   frame of a chunk is initialised from its silhouettes like the key frame (a broad
-   particle-filter search, with the key frame's pose as one more start); each next frame of
-   the chunk starts from the previous frame's pose with a smaller spread (tracking) when at
-   most ``MAX_TRACK_GAP`` frames apart — otherwise a broad search with the previous pose as a
-   hint — and is searched again from the silhouettes when tracking ends with a cost above
-   ``RECOVERY_FACTOR`` × the key frame's cost.
+1. The requested frames are cut into contiguous **chains** of at most ``chain_length`` frames
+   (near-equal lengths), and wherever two frames are too far apart to track
+   (:func:`plan_chains`). A chain's first frame is fitted from its silhouettes alone with the
+   shape free; each next frame of the chain starts from the previous frame's pose and the
+   chain's shape with a smaller spread (tracking), as the unit of :mod:`studio.fit.units`
+   describes. The **key frame** is the first fitted frame of the first chain; with
+   ``gender="auto"`` it is fitted with both models first (§4.7.2) and every chain then uses
+   the chosen one.
+2. The units run on a runner of :mod:`studio.execution`: in this process (``workers=1``), in
+   ``workers`` local processes, or on a Dask cluster (``scheduler="tcp://HOST:PORT"`` or
+   ``"local:N"``). The plan depends only on the frames and ``chain_length``, never on who runs
+   it or how many workers there are, so the same seed gives the same results everywhere. Chains
+   trade work for parallelism: a chain's first frame costs a broad search (~2× a tracked frame),
+   one chain of 24 frames has one, four chains of 6 have four but run on four workers at once.
 3. Each frame writes ``fit/NNNNNN.ply`` and ``fit/overlay/<cam>/NNNNNN.png``, then
    ``fit/NNNNNN.json`` (shape, pose, per-term costs, joints, timings, settings) last: a frame
-   whose JSON exists is complete. The session summary is ``fit/sequence.json``.
+   whose JSON exists is complete. The session's shape is the mean of the per-frame estimates
+   (their spread is the measurement spread of §4.8.6); the summary is ``fit/sequence.json``.
 4. A rerun keeps the frames already fitted with the same settings (gender, seed, options, key
-   frame), so a fit killed half-way continues where it stopped; ``force`` fits them again.
-   Worker processes die with the command (:mod:`studio.workers`).
+   frame) and continues each chain from its last stored pose, so a fit killed half-way ends as
+   if it had never stopped; ``force`` fits them again. Local worker processes die with the
+   command (:mod:`studio.workers`); on Dask a lost worker's unit is run again elsewhere.
 """
 
 from __future__ import annotations
@@ -30,20 +36,14 @@ from collections.abc import Callable
 
 import numpy as np
 
-from studio.fit.errors import FitError, UnusableFrame
-from studio.fit.frame import FitOptions, FrameFit, fit_frame, fit_frame_gender
-from studio.fit.output import write_frame_fit, write_unfitted
-from studio.fit.quality import screen_masks, summary_line
-from studio.workers import worker_pool
+from studio.fit.errors import FitError
+from studio.fit.frame import FitOptions, FrameFit
+from studio.fit.quality import summary_line
+from studio.fit.units import MAX_TRACK_GAP, fit_unit, stored_fit
 
-__all__ = ["fit_session", "load_fits", "load_quality", "open_workspace"]
+__all__ = ["CHAIN_LENGTH", "fit_session", "load_fits", "load_quality", "open_workspace", "plan_chains"]
 
 log = logging.getLogger(__name__)
-
-#: Frames further apart than this are not tracked (broad search, previous pose as a hint).
-MAX_TRACK_GAP = 2
-#: A tracked frame costing more than this × the key frame's cost is searched again.
-RECOVERY_FACTOR = 3.0
 
 
 def open_workspace(source, out=None):
@@ -60,72 +60,48 @@ def open_workspace(source, out=None):
     return ws
 
 
-def _masks(ws, frame: int) -> list[np.ndarray]:
-    from studio.workspace import WorkspaceError
-
-    try:
-        return ws.person_masks(frame)
-    except WorkspaceError as exc:
-        raise FitError(str(exc)) from None
+#: Default longest chain of tracked frames (:func:`plan_chains`).
+CHAIN_LENGTH = 6
 
 
-def _images(ws, frame: int):
-    try:
-        return ws.images(frame)
-    except Exception as exc:  # noqa: BLE001 - overlays fall back to a grey background
-        log.warning("frame %d: no camera images for the overlays (%s)", frame, exc)
-        return None
+def plan_chains(frames: list[int], chain_length: int = CHAIN_LENGTH) -> list[list[int]]:
+    """``frames`` (in the order given) cut into chains: first wherever the next frame is more
+    than ``MAX_TRACK_GAP`` away (it could not be tracked anyway), then each run into the fewest
+    chains of at most ``chain_length`` frames, of near-equal lengths.
 
-
-def _fit_chunk(job: dict) -> list[dict]:
-    """Worker: fit consecutive frames (the first from a broad search), write results."""
-    from studio.body import BodyModel
-
-    ws = open_workspace(job["path"], job["out"])
-    cameras = ws.cameras
-    model = BodyModel.load(job["gender"])
-    options = FitOptions(**{k: tuple(v) if isinstance(v, list) else v for k, v in job["options"].items()})
-    shape = np.asarray(job["shape"], float)
-    prev, prev_frame = None, None
+    >>> plan_chains(list(range(8)), 6)
+    [[0, 1, 2, 3], [4, 5, 6, 7]]
+    >>> plan_chains([0, 6, 12, 13, 14, 15], 3)
+    [[0], [6], [12, 13], [14, 15]]
+    """
+    runs, run = [], []
+    for f in frames:
+        if run and abs(int(f) - run[-1]) > MAX_TRACK_GAP:
+            runs.append(run)
+            run = []
+        run.append(int(f))
+    runs.append(run)
     out = []
-    for frame in job["frames"]:
-        masks = _masks(ws, frame)
-        screen = screen_masks(cameras, masks)  # once for both fits below
-        track = prev is not None and abs(frame - prev_frame) <= MAX_TRACK_GAP
-        hint = prev if prev is not None else job.get("hint_pose")
-        try:
-            fit = fit_frame(model, cameras, masks, frame=frame, shape=shape,
-                            previous_pose=prev if track else None, hint_pose=None if track else hint,
-                            options=options, seed=job["seed"] + frame, screen=screen)
-        except UnusableFrame as err:
-            log.warning("%s", err)
-            out.append(write_unfitted(ws.layout, err, run=job["run"]))
-            continue
-        if track and fit.costs["total"] > RECOVERY_FACTOR * job["key_cost"]:
-            # tracking lost the body: search again from the silhouettes, keep the better fit
-            log.info("frame %d: tracking cost %.2f, re-initialising from the silhouettes", frame, fit.costs["total"])
-            again = fit_frame(model, cameras, masks, frame=frame, shape=shape, hint_pose=prev,
-                              options=options, seed=job["seed"] + frame + 1, screen=screen)
-            if again.costs["total"] < fit.costs["total"]:
-                fit = again
-        write_frame_fit(ws.layout, fit, model, cameras, masks, _images(ws, frame), run=job["run"])
-        prev, prev_frame = fit.pose, frame
-        out.append(fit.to_json())
+    for run in runs:
+        n = -(-len(run) // int(chain_length))
+        out += [[int(f) for f in c] for c in np.array_split(np.asarray(run, dtype=int), n) if len(c)]
     return out
 
 
-def _done(ws, frames: list[int], run: dict) -> dict[int, dict]:
-    """Fits of ``frames`` already on disk from a run with the same settings (``run``)."""
-    done = {}
-    for f in frames:
-        p = ws.layout.fit_json(f)
-        try:
-            obj = json.loads(p.read_text())
-        except (OSError, ValueError):
-            continue
-        if obj.get("run") == run:
-            done[f] = obj
-    return done
+def _key_first(runner, spec: dict, chains: list[list[int]], starts: list, progress, total: int) -> tuple[list, dict]:
+    """``gender="auto"``: run the chains' frames in order, one at a time, until one is fitted (both
+    models, the lower cost wins); returns the states of the frames done and the spec for the rest."""
+    states = []
+    for i, chain in enumerate(chains):
+        while chain:
+            state = runner.submit(fit_unit, spec, chain.pop(0), starts[i]).result()
+            states.append(state)
+            starts[i] = state
+            if progress:
+                progress(len(states), total)
+            if state.get("pose") is not None:
+                return states, spec | {"gender": state["gender"]}
+    return states, spec
 
 
 def fit_session(
@@ -134,6 +110,8 @@ def fit_session(
     frames: list[int] | None = None,
     gender: str = "auto",
     workers: int = 1,
+    scheduler: str | None = None,
+    chain_length: int = CHAIN_LENGTH,
     options: FitOptions = FitOptions(),
     seed: int = 0,
     progress: Callable[[int, int], None] | None = None,
@@ -143,15 +121,19 @@ def fit_session(
     """Fit ``frames`` (default all) of a session (a :class:`~studio.workspace.Workspace` or a
     folder; outputs to ``out``, default the session); returns the summary dict (also written
     to ``fit/sequence.json``). Frames fitted before with the same settings are kept unless
-    ``force``."""
+    ``force``. ``workers`` local processes, or the Dask cluster ``scheduler`` (see
+    :func:`studio.execution.open_runner`); ``chain_length`` the longest chain of tracked frames
+    (:func:`plan_chains`; part of the settings a rerun compares)."""
     from rigs.atomic import atomic_write_json
-    from studio.body import GENDERS, BodyModel
+    from studio.body import GENDERS
+    from studio.execution import ExecutionError, open_runner, run_chains
     from studio.workspace import WorkspaceError
 
     if gender != "auto" and gender not in GENDERS:
         raise FitError(f"gender: expected 'auto' or one of {', '.join(GENDERS)}, got {gender!r}")
-    if isinstance(workers, bool) or not isinstance(workers, int) or workers < 1:
-        raise FitError(f"workers: expected an integer >= 1, got {workers!r}")
+    for name, value in (("workers", workers), ("chain_length", chain_length)):
+        if isinstance(value, bool) or not isinstance(value, int) or value < 1:
+            raise FitError(f"{name}: expected an integer >= 1, got {value!r}")
     ws = open_workspace(source, out)
     frames = ws.frame_indices if frames is None else list(dict.fromkeys(int(f) for f in frames))
     if not frames:
@@ -162,83 +144,64 @@ def fit_session(
         ws.check_writable(ws.layout.fit_dir)
     except WorkspaceError as exc:
         raise FitError(str(exc)) from None
-    cameras = ws.cameras
     t0 = time.perf_counter()
     total = len(frames)
-    key = frames[0]
-    run = {"gender": gender, "seed": int(seed), "key_frame": key, "options": options.to_dict()}
-    done = {} if force else _done(ws, frames, run)
-    if done:
+    run = {"gender": gender, "seed": int(seed), "key_frame": frames[0], "options": options.to_dict()}
+    plan = plan_chains(frames, chain_length)
+    if len(plan) > 1:  # recorded only when it splits: results of one chain keep their old settings
+        run["chains"] = plan
+    kept = [] if force else [f for f in frames if stored_fit(ws.layout, f, run) is not None]
+    if force:  # a frame's JSON marks it complete: gone, so that every unit fits again
+        for f in frames:
+            ws.layout.fit_json(f).unlink(missing_ok=True)
+    if kept:
         log.info("%d of %d frame(s) already fitted with the same settings: kept (--force fits them again)",
-                 len(done), total)
-    results = {f: done[f] for f in done}
-    # 1. key frame: shape free, gender chosen — the first frame the quality gates let through
-    key_fit = None
-    for key in frames:
-        if key in done:
-            if done[key].get("fitted", True):
-                key_fit = FrameFit.from_json(done[key])
-                break
-            continue
-        masks = _masks(ws, key)
-        try:
-            key_fit = fit_frame_gender(cameras, masks, gender, frame=key, options=options, seed=seed + key)
-        except UnusableFrame as err:
-            log.warning("%s", err)
-            results[key] = write_unfitted(ws.layout, err, run=run)
-            if progress:
-                progress(len(results), total)
-            continue
-        model = BodyModel.load(key_fit.gender)
-        write_frame_fit(ws.layout, key_fit, model, cameras, masks, _images(ws, key), run=run)
-        break
-    if key_fit is None:
+                 len(kept), total)
+    spec = {"path": str(ws.path), "out": str(ws.layout.root), "gender": gender, "options": options.to_dict(),
+            "seed": int(seed), "run": run}
+    try:
+        with open_runner(min(workers, len(plan)), scheduler) as runner:
+            todo = [list(c) for c in plan]
+            starts = [None] * len(todo)
+            states = []
+            if gender == "auto":
+                states, spec = _key_first(runner, spec, todo, starts, progress, total)
+            for chain in run_chains(runner, fit_unit, todo, spec=spec, starts=starts, progress=progress,
+                                    done=len(states), total=total):
+                states.extend(chain)
+            where = runner.where
+    except ExecutionError as exc:
+        raise FitError(str(exc)) from None
+    results = {s["frame"]: s["record"] for s in states}
+    fitted = [f for f in frames if results[f].get("fitted", True)]
+    if not fitted:
         raise FitError(f"{ws.path}: no frame passed the segmentation checks ({summary_line(_qualities(results))}); "
                        f"results in {ws.layout.fit_dir}")
-    results[key] = key_fit.to_json() | {"run": run}
-    if progress:
-        progress(len(results), total)
-    # 2. other frames, shape held, in contiguous chunks
-    rest = [f for f in frames if f not in results]
-    n_chunks = max(1, min(workers, len(rest)))
-    chunks = [list(c) for c in np.array_split(np.asarray(rest, dtype=int), n_chunks) if len(c)]
-    jobs = [{"path": str(ws.path), "out": str(ws.layout.root), "gender": key_fit.gender,
-             "shape": key_fit.shape.tolist(), "frames": [int(f) for f in c], "options": options.to_dict(),
-             "seed": int(seed), "hint_pose": key_fit.pose.tolist(), "key_cost": float(key_fit.costs["total"]),
-             "run": run} for c in chunks]
-    if jobs:
-        if workers <= 1 or len(jobs) == 1:
-            for job in jobs:
-                for r in _fit_chunk(job):
-                    results[r["frame"]] = r
-                    if progress:
-                        progress(len(results), total)
-        else:
-            with worker_pool(len(jobs)) as pool:
-                futures = [pool.submit(_fit_chunk, job) for job in jobs]
-                for fut in futures:
-                    for r in fut.result():
-                        results[r["frame"]] = r
-                        if progress:
-                            progress(len(results), total)
+    key = fitted[0]
+    key_fit = FrameFit.from_json(results[key])
+    starts_fitted = [next((f for f in c if results[f].get("fitted", True)), None) for c in plan]
     summary = {
         "format": "studio.fit-sequence",
         "version": 1,
         "gender": key_fit.gender,
         "gender_costs": key_fit.costs.get("gender_costs"),
         "key_shape": key_fit.shape.tolist(),
-        "shape": np.mean([results[f]["shape"] for f in results if "shape" in results[f]], axis=0).tolist(),
+        "shape": np.mean([results[f]["shape"] for f in fitted], axis=0).tolist(),
         "key_frame": key,
         "frames": sorted(results),
-        "kept": sorted(done),
-        "costs": {str(f): results[f]["costs"]["total"] for f in sorted(results) if "costs" in results[f]},
+        "kept": sorted(kept),
+        "chains": plan,
+        "chain_starts": [f for f in starts_fitted if f is not None],
+        "costs": {str(f): results[f]["costs"]["total"] for f in sorted(fitted)},
         "quality": {str(f): (results[f].get("quality") or {}).get("status", "unchecked") for f in sorted(results)},
         "quality_summary": summary_line(_qualities(results)),
-        "workers": workers,
+        "workers": workers if scheduler is None else None,
+        "executor": where,
         "wall_time": round(time.perf_counter() - t0, 3),
         "settings": options.to_dict(),
         "run": run,
-        "shape_strategy": "key frame fitted first; every other frame refines the key shape; session shape = mean over frames",
+        "shape_strategy": "each chain's first frame fitted from the silhouettes with the shape free, the next "
+                          "frames of the chain tracked from it; session shape = mean over fitted frames",
     }
     atomic_write_json(ws.layout.fit_sequence, summary)
     return summary

@@ -14,7 +14,12 @@ Output, inside the session folder::
 
 Per frame: single-view classification + morphology in each camera (§5.5.1), multi-view shadow
 voting (with the photometric-consistency check of :mod:`studio.segment.voting`) when the session
-has a calibration and ≥ 2 cameras (§5.5.2), then skin inside the person (§6.3.4). Frames are independent and processed in parallel worker processes.
+has a calibration and ≥ 2 cameras (§5.5.2), then skin inside the person (§6.3.4).
+
+Frames are independent units of work (:mod:`studio.execution`): run in this process, in local
+worker processes or on a Dask cluster. The parent fits and saves the background and skin models
+first; every worker (the parent too) then loads them from the output folder (shared storage),
+so each runner labels every frame the same.
 """
 
 from __future__ import annotations
@@ -22,21 +27,19 @@ from __future__ import annotations
 import json
 import logging
 import time
+import uuid
 from collections.abc import Callable
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
-import cv2
 import numpy as np
 
-from studio.blas import limit_blas_threads
 from studio.segment.background import BackgroundModel
 from studio.segment.classify import PERSON, SHADOW, Thresholds
 from studio.segment.errors import SegmentationError
 from studio.segment.morphology import Morphology
 from studio.segment.skin import SkinClassifier
 from studio.segment.voting import FloorVotes, ShadowVoter
-from studio.workers import worker_pool
 
 __all__ = ["SegmentOptions", "SegmentationSummary", "segment_session"]
 
@@ -82,12 +85,6 @@ class SegmentationSummary:
 _STATE: dict = {}
 
 
-def _init_worker(state: dict) -> None:
-    cv2.setNumThreads(1)
-    limit_blas_threads()  # one process per core: BLAS threads would only compete (studio.blas)
-    _setup_state(state)
-
-
 def _setup_state(state: dict) -> None:
     from rigs.session import Session
     from studio.workspace import Layout
@@ -102,6 +99,34 @@ def _setup_state(state: dict) -> None:
     _STATE["floor_votes"] = (
         FloorVotes(calib, grid, state["cameras"]) if grid is not None and state["overlay_every"] > 0 else None
     )
+
+
+def _load_state(spec: dict) -> dict:
+    """The worker state of ``spec`` (built once per process from the saved models, then kept)."""
+    from studio.workspace import Workspace
+
+    if _STATE.get("token") == spec["token"]:
+        return _STATE
+    ws = Workspace.open(spec["path"], out=spec["out"])
+    options = spec["options"]
+    models = {cam: BackgroundModel.load(ws.layout.background_model_dir(cam)).with_settings(
+        options.thresholds, options.morphology) for cam in ws.camera_names}
+    skin_file = options.skin_model
+    skin = {cam: SkinClassifier.load(skin_file if skin_file is not None else ws.layout.skin_model(cam))
+            for cam in spec["skin_cameras"]}
+    calib = ws.calibration if spec["voting"] else None
+    _setup_state({"path": spec["path"], "out": spec["out"], "cameras": ws.camera_names, "models": models,
+                  "calibration": calib, "overlay_every": int(options.overlay_every), "skin": skin,
+                  "grid": _floor_grid(calib, options.floor_resolution) if calib is not None else None})
+    _STATE["token"] = spec["token"]
+    return _STATE
+
+
+def _segment_unit(spec: dict, index: int, previous=None) -> dict:
+    """One frame as a unit of :func:`studio.execution.run_chains` (``previous`` unused: frames
+    are independent)."""
+    _load_state(spec)
+    return _process_frame(index)
 
 
 def _overlay(image: np.ndarray, labels: np.ndarray, skin: np.ndarray | None) -> np.ndarray:
@@ -280,6 +305,7 @@ def segment_session(
     *,
     frames: list[int] | None = None,
     workers: int = 1,
+    scheduler: str | None = None,
     progress: Callable[[int, int], None] | None = None,
     force: bool = False,
     out: str | Path | None = None,
@@ -289,12 +315,15 @@ def segment_session(
     ``source`` is a :class:`studio.workspace.Workspace` or a session folder (outputs then go
     to ``out``, default the session). Frames already segmented with the same settings are
     skipped (a rerun after an interruption continues where it stopped) unless ``force``.
-    ``progress(done, total)`` is called after each frame. Raises :class:`SegmentationError`
+    ``progress(done, total)`` is called after each frame. The frames run in this process
+    (``workers`` 1), in ``workers`` local processes, or on the Dask cluster ``scheduler``
+    (:func:`studio.execution.open_runner`). Raises :class:`SegmentationError`
     for a camera without background frames, image sizes that disagree with the background
     model or the calibration, and a missing calibration when voting is requested.
     """
     from rigs.atomic import atomic_write_json
     from rigs.imageio import read_image
+    from studio.execution import ExecutionError, open_runner, run_chains
     from studio.workspace import SEGMENTATION_RESERVED, WorkspaceError
 
     t0 = time.perf_counter()
@@ -329,7 +358,10 @@ def segment_session(
     }
     _setup_state(state)
     state["skin"] = _skin_models(ws, _STATE, frames, options)
-    _STATE["skin"] = state["skin"]
+    # workers elsewhere read a given skin model by its absolute path
+    unit_options = options if options.skin_model is None else replace(options, skin_model=Path(options.skin_model).resolve())
+    spec = {"token": uuid.uuid4().hex, "path": str(ws.path), "out": str(ws.layout.root), "options": unit_options,
+            "voting": voting, "skin_cameras": sorted(state["skin"])}
     settings = _settings(models, options, voting, state["skin"])
     skipped = [] if force else _done_frames(ws, frames, settings)
     todo = [i for i in frames if i not in set(skipped)]
@@ -364,17 +396,13 @@ def segment_session(
                  len(skipped), total)
         if progress:
             progress(len(results), total)
-    if workers <= 1 or len(todo) <= 1:
-        for index in todo:
-            results.append(_process_frame(index))
-            if progress:
-                progress(len(results), total)
-    else:
-        with worker_pool(workers, _init_worker, (state,)) as pool:
-            for result in pool.map(_process_frame, todo, chunksize=2):
+    try:
+        with open_runner(workers if len(todo) > 1 else 1, scheduler) as runner:
+            for (result,) in run_chains(runner, _segment_unit, [[i] for i in todo], spec=spec,
+                                        progress=progress, done=len(results), total=total):
                 results.append(result)
-                if progress:
-                    progress(len(results), total)
+    except ExecutionError as exc:
+        raise SegmentationError(str(exc)) from None
     seconds = time.perf_counter() - t0
     fractions = {
         cam: dict(zip(("background", "person", "shadow"), np.mean([r["fractions"][cam] for r in results], axis=0).tolist()))

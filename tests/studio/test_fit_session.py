@@ -24,14 +24,18 @@ def _cameras(size=(164, 124), focal=140.0):
     return cams
 
 
-def make_session(path, *, calibration=True, segmentation=True, n_frames=2):
-    """A tiny session: our own female body walking 5 cm per frame, labels = true silhouettes."""
+def make_session(path, *, calibration=True, segmentation=True, n_frames=2, backgrounds=0):
+    """A tiny session: our own female body walking 5 cm per frame, labels = true silhouettes
+    (``segmentation``), ``backgrounds`` empty-scene frames per camera (for ``studio segment``)."""
     model = BodyModel.load("female")
     cams = _cameras()
     calib_file = path.parent / f"{path.name}-calibration.json"
     RigCalibration(cameras={c.name: c for c in cams}).save(calib_file)
     writer = SessionWriter.create(path, [c.name for c in cams], rig="test",
                                   calibration=calib_file if calibration else None)
+    for c in cams:
+        for i in range(backgrounds):
+            writer.write_background(c.name, i, np.full((c.size[1], c.size[0], 3), 60, np.uint8))
     poses = []
     for i in range(n_frames):
         pose = model.default_pose()
@@ -155,7 +159,7 @@ def test_an_all_person_frame_is_refused_never_measured(tmp_path, capsys):
 
 
 def test_rerun_keeps_frames_fitted_with_the_same_settings(tmp_path, monkeypatch):
-    import studio.fit.session as fs
+    import studio.fit.units as fs
 
     make_session(tmp_path / "s", n_frames=3)
     first = fit_session(tmp_path / "s", gender="female", options=TINY, seed=0)
@@ -181,7 +185,7 @@ def test_rerun_keeps_frames_fitted_with_the_same_settings(tmp_path, monkeypatch)
 
 
 def test_unwritable_fit_folder_fails_before_any_work(tmp_path, monkeypatch):
-    import studio.fit.session as fs
+    import studio.fit.units as fs
 
     make_session(tmp_path / "s", n_frames=1)
     (tmp_path / "s" / "fit").write_text("not a folder")

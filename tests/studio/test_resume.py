@@ -5,7 +5,6 @@ from __future__ import annotations
 
 import json
 import os
-import signal
 import subprocess
 import sys
 import time
@@ -19,21 +18,9 @@ from studio.segment import SegmentOptions, segment_session
 from studio.segment.synthetic import write_session
 from studio.workspace import Layout
 
+from prockit import children, kill_and_time
+
 ROOT = Path(__file__).parents[2]
-
-
-def _children(pid: int) -> list[int]:
-    try:
-        return [int(v) for v in Path(f"/proc/{pid}/task/{pid}/children").read_text().split()]
-    except FileNotFoundError:
-        return []
-
-
-def _alive(pid: int) -> bool:
-    try:
-        return Path(f"/proc/{pid}/stat").read_text().split(") ")[1][0] != "Z"
-    except FileNotFoundError:
-        return False
 
 
 @pytest.mark.skipif(not sys.platform.startswith("linux"), reason="reads /proc")
@@ -47,21 +34,13 @@ def test_killed_segment_leaves_no_workers_and_resumes(tmp_path):
     workers: set[int] = set()
     t0 = time.monotonic()
     while time.monotonic() - t0 < 60:
-        workers |= set(_children(proc.pid))
+        workers |= set(children(proc.pid))
         if len(workers) >= 2 and (lay.segmentation_dir / "cam2").is_dir() and \
                 len(list((lay.segmentation_dir / "cam2").glob("*.png"))) >= 4:
             break
         assert proc.poll() is None, "segment finished before it could be interrupted"
         time.sleep(0.02)
-    os.kill(proc.pid, signal.SIGKILL)
-    proc.wait(timeout=10)
-    t_kill = time.monotonic()
-    while any(_alive(p) for p in workers) and time.monotonic() - t_kill < 10:
-        time.sleep(0.02)
-    gone = time.monotonic() - t_kill
-    leftover = [p for p in workers if _alive(p)]
-    for p in leftover:
-        os.kill(p, signal.SIGKILL)
+    gone, leftover = kill_and_time(proc, workers)
     assert not leftover and gone < 5.0, f"workers {leftover} alive {gone:.1f} s after the parent was killed"
     # every label under a final name is whole; complete frames are those with all cameras' labels
     done = [i for i in range(60) if all(lay.labels(c, i).is_file() for c in cams)]

@@ -11,16 +11,10 @@ from pathlib import Path
 
 import pytest
 
+from prockit import alive
+
 HERE = Path(__file__).parent
 ROOT = HERE.parents[1]
-
-
-def _alive(pid: int) -> bool:
-    try:
-        with open(f"/proc/{pid}/stat") as f:
-            return f.read().split(") ")[1][0] != "Z"
-    except FileNotFoundError:
-        return False
 
 
 def _start_parent():
@@ -29,18 +23,18 @@ def _start_parent():
                             stderr=subprocess.PIPE, text=True, env=env, start_new_session=True)
     line = proc.stdout.readline()
     pids = [int(v) for v in line.split()]
-    assert len(pids) == 2 and all(_alive(p) for p in pids), proc.stderr.read() if not pids else pids
+    assert len(pids) == 2 and all(alive(p) for p in pids), proc.stderr.read() if not pids else pids
     return proc, pids
 
 
 def _seconds_until_gone(pids, limit=10.0) -> float:
     t0 = time.monotonic()
     while time.monotonic() - t0 < limit:
-        if not any(_alive(p) for p in pids):
+        if not any(alive(p) for p in pids):
             return time.monotonic() - t0
         time.sleep(0.02)
     for p in pids:  # do not leave them behind even when the test fails
-        if _alive(p):
+        if alive(p):
             os.kill(p, signal.SIGKILL)
     return float("inf")
 

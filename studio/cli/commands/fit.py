@@ -4,6 +4,8 @@ from __future__ import annotations
 
 from pathlib import Path
 
+from studio.fit.session import CHAIN_LENGTH
+
 
 def register(subparsers) -> None:
     p = subparsers.add_parser(
@@ -22,6 +24,12 @@ def register(subparsers) -> None:
     p.add_argument("--gender", default="auto", choices=["auto", "female", "male", "neutral"],
                    help="body model; auto fits female and male on the first frame and keeps the lower cost")  # fmt: skip
     p.add_argument("--workers", type=int, default=1, help="parallel worker processes (default: %(default)s)")
+    p.add_argument("--scheduler", default=None, metavar="ADDRESS",
+                   help="run the frames on a Dask cluster: tcp://HOST:PORT of a running scheduler, or local:N "
+                        "for a cluster of N local processes (needs pip install .[dask])")  # fmt: skip
+    p.add_argument("--chain-length", type=int, default=CHAIN_LENGTH,
+                   help="longest run of frames tracked one from the other; each run starts with a search from the "
+                        "silhouettes and runs on one worker (default: %(default)s)")  # fmt: skip
     p.add_argument("--seed", type=int, default=0, help="random seed (default: %(default)s)")
     p.add_argument("--quick", action="store_true", help="fewer particles and evaluations (about 3x faster, coarser)")
     p.add_argument("--force", action="store_true",
@@ -57,7 +65,8 @@ def run(args) -> int:
         task = bar.add_task("fitting", total=n)
         try:
             summary = fit_session(ws, frames=frames, gender=args.gender, workers=args.workers,
-                                  options=options, seed=args.seed, force=args.force,
+                                  scheduler=args.scheduler, chain_length=args.chain_length, options=options,
+                                  seed=args.seed, force=args.force,
                                   progress=lambda done, total: bar.update(task, completed=done))
         except FitError as exc:
             raise CommandError(str(exc)) from None
@@ -65,6 +74,7 @@ def run(args) -> int:
     if summary["kept"]:
         print(f"{len(summary['kept'])} frame(s) already fitted with the same settings were kept (--force fits them again)")
     print(f"fitted {len(costs)} frame(s) with the {summary['gender']} model in {summary['wall_time']:.1f} s "
+          f"on {summary['executor']} "
           f"(cost mean {sum(costs) / len(costs):.2f}); results in {ws.layout.fit_dir}")
     print(f"quality: {summary['quality_summary']}")
     return 0

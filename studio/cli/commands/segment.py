@@ -21,6 +21,9 @@ def register(subparsers) -> None:
     p.add_argument("session", type=Path, help="capture-session folder")
     p.add_argument("--workers", type=int, default=min(2, os.cpu_count() or 1),
                    help="parallel worker processes over frames (default: %(default)s)")  # fmt: skip
+    p.add_argument("--scheduler", default=None, metavar="ADDRESS",
+                   help="run the frames on a Dask cluster: tcp://HOST:PORT of a running scheduler, or local:N "
+                        "for a cluster of N local processes (needs pip install .[dask])")  # fmt: skip
     p.add_argument("--frames", default=None,
                    help="frames to segment: START:STOP[:STEP] (indices, STOP excluded) or a comma list")  # fmt: skip
     p.add_argument("--refit-background", action="store_true",
@@ -79,6 +82,7 @@ def run(args) -> int:
             options,
             frames=frames,
             workers=args.workers,
+            scheduler=args.scheduler,
             force=args.force,
             progress=lambda done, n: bar.update(task, completed=done, total=n),
         )

@@ -47,6 +47,7 @@ from typing import Any
 import yaml
 
 from rigs.device import PIXEL_FORMATS, RigError
+from rigs.pixelformats import SENSOR_FORMATS
 
 __all__ = ["CameraConfig", "RigDescription", "SyncConfig", "TriggerConfig"]
 
@@ -321,8 +322,8 @@ class RigDescription:
         if not isinstance(device, Mapping):
             raise _err(where, f"{at}.device", f"expected a mapping (id/serial/address), got {device!r}")
         pf = c.get("pixel_format", "RGB8")
-        if pf not in PIXEL_FORMATS:
-            raise _err(where, f"{at}.pixel_format", f"expected one of {list(PIXEL_FORMATS)}, got {pf!r}")
+        if pf not in PIXEL_FORMATS and pf not in SENSOR_FORMATS:
+            raise _err(where, f"{at}.pixel_format", f"expected one of {list(dict.fromkeys([*PIXEL_FORMATS, *SENSOR_FORMATS]))}, got {pf!r}")
         size = {}
         for key in ("width", "height"):
             v = c.get(key)

@@ -176,13 +176,14 @@ class FrameQueue:
         return self._q.qsize()
 
 
-def _coerce_feature(camera: str, name: str, value: Any) -> Any:
-    if name not in FEATURES:
+def _coerce_feature(camera: str, name: str, value: Any, rules: dict | None = None) -> Any:
+    rules = FEATURES if rules is None else rules
+    if name not in rules:
         raise RigError(
             f"camera {camera!r}: unknown feature {name!r}; known GenICam features: "
-            f"{', '.join(sorted(FEATURES))}"
+            f"{', '.join(sorted(rules))}"
         )
-    kind, allowed = FEATURES[name]
+    kind, allowed = rules[name]
     try:
         if kind is bool:
             if not isinstance(value, (bool, np.bool_)):
@@ -227,6 +228,8 @@ class CameraDevice(abc.ABC):
     """
 
     backend = "abstract"
+    #: the features this backend takes: name -> (type, allowed values or None)
+    feature_rules: dict[str, tuple[type, tuple | None]] = FEATURES
     #: True when a frame's image memory goes back to the driver at the end of the lease
     #: (GenTL buffers); consumers that keep frames must then copy them.
     buffers_reused = False
@@ -256,7 +259,8 @@ class CameraDevice(abc.ABC):
         self._delivered = 0
         if features:
             self._features.update(
-                {k: _coerce_feature(self.name, k, v) for k, v in features.items() if v is not None}
+                {k: _coerce_feature(self.name, k, v, self.feature_rules) for k, v in features.items()
+                 if v is not None}
             )
 
     # -- features ---------------------------------------------------------------------
@@ -267,7 +271,7 @@ class CameraDevice(abc.ABC):
         wrong type or value, or a size/format change while streaming.
         """
         self._check_open()
-        coerced = {k: _coerce_feature(self.name, k, v) for k, v in features.items()}
+        coerced = {k: _coerce_feature(self.name, k, v, self.feature_rules) for k, v in features.items()}
         if self._streaming:
             locked = sorted(set(coerced) & LOCKED_WHILE_STREAMING)
             if locked:
@@ -281,7 +285,7 @@ class CameraDevice(abc.ABC):
 
     def get(self, feature: str) -> Any:
         """Current value of a GenICam feature."""
-        if feature not in FEATURES:
+        if feature not in self.feature_rules:
             raise RigError(f"camera {self.name!r}: unknown feature {feature!r}")
         if feature not in self._features:
             raise RigError(f"camera {self.name!r}: feature {feature} is not set yet")
@@ -335,6 +339,11 @@ class CameraDevice(abc.ABC):
     def calibration_source(self):
         """A calibration file the source provides (simulated/replay session), else None."""
         return None
+
+    def device_stats(self) -> dict[str, Any]:
+        """The driver's own counters (a GenTL/Aravis stream's completed buffers, failures,
+        underruns, resent packets, ...) as a JSON-serialisable dict; empty for playback."""
+        return {}
 
     @property
     def stats(self) -> CameraStats:

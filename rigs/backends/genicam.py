@@ -31,7 +31,7 @@ from rigs.backends._genapi import GenICamCamera, RawBuffer, Transport, common_op
 from rigs.backends._trigger import shared_trigger
 from rigs.device import RigError
 
-__all__ = ["GenTLCamera", "HarvesterTransport", "list_devices", "open_camera", "producer_files"]
+__all__ = ["GenTLCamera", "HarvesterTransport", "open_camera", "open_harvester", "producer_files"]
 
 log = logging.getLogger(__name__)
 
@@ -68,7 +68,7 @@ def producer_files(producer: Any = None) -> list[Path]:
     return found
 
 
-def _harvester(shared: dict | None, producers: list[Path]):
+def open_harvester(shared: dict | None, producers: list[Path]):
     """The rig's Harvester for ``producers`` (``shared`` keeps it and counts its users)."""
     key = ("harvester", tuple(str(p) for p in producers))
     if shared is not None and key in shared:
@@ -87,17 +87,6 @@ def _harvester(shared: dict | None, producers: list[Path]):
     if shared is not None:
         shared[key] = entry
     return entry
-
-
-def list_devices(producers: list[Path]) -> list[dict[str, str]]:
-    """The devices the producers see (vendor, model, serial, interface, id)."""
-    entry = _harvester(None, producers)
-    try:
-        return [{"id": str(d.id_), "vendor": str(d.vendor), "model": str(d.model), "serial": str(d.serial_number),
-                 "interface": str(d.tl_type), "user_id": str(d.user_defined_name or "")}
-                for d in entry["harvester"].device_info_list]  # fmt: skip
-    finally:
-        entry["harvester"].reset()
 
 
 class HarvesterTransport(Transport):
@@ -208,7 +197,7 @@ def open_camera(config, description, *, epoch_ns: int, shared: dict | None = Non
     raw = dict(config.options)
     options = common_options(name, "genicam", raw, _OPTIONS)
     search = _search_key(name, dict(config.device))
-    entry = _harvester(shared, producer_files(raw.get("producer")))
+    entry = open_harvester(shared, producer_files(raw.get("producer")))
     try:
         transport = HarvesterTransport(entry, search, name)
     except BaseException:

@@ -1,0 +1,168 @@
+"""The aravis backend against Aravis' in-process Fake camera (no network: only the Fake
+interface is enabled; the device list is never updated with GigE Vision enabled)."""
+
+from __future__ import annotations
+
+import json
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from rigs import Rig, RigDescription, RigError, Session
+
+try:
+    from rigs.backends.aravis import import_aravis
+
+    ARV, _ = import_aravis()
+except RigError as exc:  # PyGObject or gir1.2-aravis-0.8 missing: `make test` installs both
+    pytest.skip(f"aravis backend unavailable: {exc}", allow_module_level=True)
+
+RIG_YAML = Path(__file__).resolve().parents[2] / "rigs" / "aravis_fake.yaml"
+
+
+def fake_rig(n=2, **overrides) -> RigDescription:
+    desc = RigDescription.load(RIG_YAML)
+    if n == 1:
+        from dataclasses import replace
+
+        desc = replace(desc, cameras={"cam0": desc.cameras["cam0"]})
+    return desc.with_overrides(**overrides) if overrides else desc
+
+
+def ramp_offset(image: np.ndarray) -> int:
+    """The Fake camera's diagonal ramp (arvfakecamera.c): Mono8 ``(x + y + id) mod 255``;
+    returns the offset after checking every pixel."""
+    h, w = image.shape
+    y, x = np.mgrid[0:h, 0:w]
+    c = int(image[0, 0])
+    np.testing.assert_array_equal(image, ((x + y + c) % 255).astype(np.uint8))
+    return c
+
+
+def mono16_frame_id(image: np.ndarray) -> int:
+    """The Fake camera's Mono16 ramp ``256 (x + y + id) mod 65535``: the device frame id that
+    reproduces every pixel."""
+    h, w = image.shape
+    y, x = np.mgrid[0:h, 0:w]
+    ids = np.flatnonzero(256 * np.arange(65536) % 65535 == int(image[0, 0]))
+    fits = [i for i in ids if np.array_equal(image, 256 * (x + y + int(i)) % 65535)]
+    assert len(fits) == 1, f"no single frame id reproduces the Mono16 ramp: {fits}"
+    return int(fits[0])
+
+
+def test_two_fake_cameras_stream_the_known_ramp_in_sync():
+    with Rig.open(fake_rig()) as rig:
+        mfs = list(rig.multiframes(8))
+        stats = {n: c.device_stats() for n, c in rig.cameras.items()}
+        info = rig.cameras["cam0"].info
+    assert info == {"vendor": "Aravis", "model": "Fake", "serial": "1"}
+    for cam in ("cam0", "cam1"):
+        ids = [mf.frame_ids[cam] for mf in mfs]
+        offsets = [ramp_offset(mf.images[cam]) for mf in mfs]
+        assert all(b > a for a, b in zip(ids, ids[1:])), f"{cam}: frame ids not increasing: {ids}"
+        # the ramp advances by one per device frame: offset steps equal frame-id steps
+        assert [(b - a) % 255 for a, b in zip(offsets, offsets[1:])] == [(b - a) % 255 for a, b in zip(ids, ids[1:])]
+        assert mfs[0].images[cam].shape == (120, 160)
+        assert stats[cam]["n_completed_buffers"] >= 8 and stats[cam]["n_failures"] == 0
+        assert stats[cam]["host_timestamps"] == 0, "the Fake stream stamps buffers itself"
+    assert max(mf.spread_ns for mf in mfs) <= 5_000_000
+
+
+def test_mono16_and_rgb8_formats():
+    with Rig.open(fake_rig(1, pixel_format="Mono16")) as rig:
+        img = next(rig.multiframes(1)).images["cam0"]
+    assert img.dtype == np.uint16
+    assert 65400 < mono16_frame_id(img) < 65500  # the Fake counter starts at 65401
+    with Rig.open(fake_rig(1, pixel_format="RGB8")) as rig:
+        rgb = next(rig.multiframes(1)).images["cam0"]
+    assert rgb.shape == (120, 160, 3) and rgb.dtype == np.uint8
+    # a colour map of the same ramp: constant along anti-diagonals, varying across them
+    assert np.array_equal(rgb[0, 1], rgb[1, 0]) and np.array_equal(rgb[5, 9], rgb[9, 5])
+    assert len(np.unique(rgb.reshape(-1, 3), axis=0)) > 50
+
+
+def test_fake_bayer_kept_raw_with_its_pattern():
+    with Rig.open(fake_rig(1, pixel_format="BayerRG8", debayer=False)) as rig:
+        raw = next(rig.multiframes(1)).images["cam0"]
+        stats = rig.cameras["cam0"].device_stats()
+    assert raw.shape == (120, 160) and stats["bayer_pattern"] == "RG" and stats["debayered"] is False
+    with Rig.open(fake_rig(1, pixel_format="BayerRG8")) as rig:
+        rgb = next(rig.multiframes(1)).images["cam0"]
+    assert rgb.shape == (120, 160, 3)
+
+
+def test_refused_settings_name_node_and_allowed_values():
+    with pytest.raises(RigError, match=r"camera 'cam0': node PixelFormat='BayerRG12' refused: allowed values are "
+                                       r"BayerBG8, BayerGB8, BayerGR8, BayerRG8, Mono8, RGB8, Mono16"):
+        Rig.open(fake_rig(1, pixel_format="BayerRG12"))
+    with pytest.raises(RigError, match=r"node Width=100000 refused: out of range, allowed int in \[1, 2048\]"):
+        Rig.open(fake_rig(1, width=100000))
+    with pytest.raises(RigError, match=r"GevIEEE1588=True cannot be set: the device has no GenApi node "
+                                       r"GevIEEE1588 or PtpEnable"):
+        Rig.open(fake_rig(1).__class__.from_dict({**_as_dict(), "sync": {"ptp": True}}))
+    with pytest.raises(RigError, match=r"option chunks: the device has no GenApi node 'ChunkModeActive'"):
+        Rig.open(fake_rig(1, chunks=True))
+    with pytest.raises(RigError, match=r"options \['packet_size'\] apply to GigE Vision cameras only; 'Fake' is not one"):
+        Rig.open(fake_rig(1, packet_size=8164))
+    with pytest.raises(RigError, match=r"Aravis cannot open device 'Fake_9'"):
+        Rig.open({**_as_dict(), "cameras": {"cam0": {"device": {"id": "Fake_9"}}}})
+
+
+def _as_dict() -> dict:
+    import yaml
+
+    d = yaml.safe_load(RIG_YAML.read_text())
+    d["cameras"] = {"cam0": {}}
+    return d
+
+
+def test_teardown_releases_the_device_and_errors_leak_nothing():
+    d = _as_dict()
+    d["cameras"] = {"cam0": {}, "cam1": {"width": 99999}}
+    with pytest.raises(RigError, match="cam1"):
+        Rig.open(d)
+    from rigs.backends import _genapi
+
+    assert not [t for t in _genapi._OPEN if type(t).__name__ == "AravisTransport"], "cam0 left open"
+    for _ in range(2):  # re-open after a clean close and after an interrupted capture
+        with pytest.raises(KeyboardInterrupt), Rig.open(fake_rig()) as rig:
+            for mf in rig.multiframes(50):
+                if mf.index == 2:
+                    raise KeyboardInterrupt
+        assert all(c.transport.camera is None for c in rig.cameras.values())
+    with Rig.open(fake_rig()) as rig:
+        assert len(list(rig.multiframes(3))) == 3
+
+
+def test_throttled_consumer_counts_underruns():
+    """2 buffers at 100 Hz and a consumer that takes 50 ms per frame: the stream underruns."""
+    with Rig.open(fake_rig(1, frame_rate=100.0, buffers=2)) as rig:
+        cam = rig.cameras["cam0"]
+        cam.start()
+        for _ in range(6):
+            with cam.fetch(timeout=1.0):
+                time.sleep(0.05)
+        stats = cam.device_stats()
+    assert stats["n_underruns"] >= 5, stats
+
+
+def test_capture_session_records_frames_and_stream_statistics(tmp_path, capsys):
+    from studio.cli import main
+
+    out = tmp_path / "s"
+    assert main(["capture", "--rig", str(RIG_YAML), "--out", str(out), "--frames", "12"]) == 0
+    s = Session.open(out)
+    assert len(s.frame_indices) == 12 and s.cameras == ["cam0", "cam1"]
+    streams = s.drops["streams"]
+    for cam in ("cam0", "cam1"):
+        assert streams[cam]["n_completed_buffers"] >= 12 and streams[cam]["n_failures"] == 0
+        assert {"n_underruns", "n_transferred_bytes"} <= set(streams[cam])
+        ramp_offset(s.image(cam, s.frame_indices[5]))
+    info = json.loads((out / "session.json").read_text())
+    assert info["pixel_formats"] == {"cam0": "Mono8", "cam1": "Mono8"}
+    capsys.readouterr()
+    assert main(["session", "info", str(out)]) == 0
+    text = capsys.readouterr().out
+    assert f"stream    cam0: n_completed_buffers {streams['cam0']['n_completed_buffers']}" in text

@@ -4,7 +4,8 @@ With ``trigger: {mode: software}`` each GenICam camera waits for ``TriggerSoftwa
 :class:`SoftwareTrigger` per rig (kept in the backends' ``shared`` dict) fires it on every
 armed camera at ``rate_hz``, tick ``k`` at ``t0 + k / rate_hz`` (no drift from sleep
 overshoot; a tick that falls more than one period behind is skipped and counted in
-``missed``). It waits until all ``expected`` cameras are armed, so every camera sees the same
+``missed``), and two ticks are never closer than half a period (a camera still reading out
+the last frame would merge or refuse a trigger that comes too soon). It waits until all ``expected`` cameras are armed, so every camera sees the same
 first trigger and their frame counters agree, and it stops firing as soon as one disarms.
 The thread is a daemon: it never outlives the process, and it holds no camera after
 :meth:`disarm`.
@@ -77,13 +78,15 @@ class SoftwareTrigger:
                         self.errors.append(msg)
                     log.error(msg)
             self.fired += 1
+            fired_at = time.monotonic()
             k += 1
-            late = time.monotonic() - (t0 + k * self.period_s)
+            late = fired_at - (t0 + k * self.period_s)
             if late > self.period_s:
                 skip = int(late // self.period_s)
                 self.missed += skip
                 k += skip
-            if self._wake.wait(max(0.0, t0 + k * self.period_s - time.monotonic())):
+            due = max(t0 + k * self.period_s, fired_at + 0.5 * self.period_s)
+            if self._wake.wait(max(0.0, due - time.monotonic())):
                 return
 
 

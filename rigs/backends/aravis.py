@@ -7,7 +7,7 @@ extra. The camera is :class:`rigs.backends._genapi.GenICamCamera` over :class:`A
 Rig YAML (camera keys)::
 
     backend: aravis
-    device: {id: Fake_1}          # id (Aravis device id, IP address for GigE) | serial | model
+    device: {id: Fake_1}          # id (Aravis device id) | address (GigE camera's IPv4) | serial | model
     interfaces: [Fake]            # Aravis interfaces to enable (others disabled); default: Aravis' own
     packet_size: 8164             # GigE only: bytes, or "auto" (negotiated); default: camera's
     packet_delay: 0               # GigE only: inter-packet delay, ns
@@ -24,6 +24,7 @@ discovery broadcasts on the local networks); opening by ``id`` does not enumerat
 
 from __future__ import annotations
 
+import ipaddress
 import logging
 from typing import Any
 
@@ -213,8 +214,13 @@ class AravisCamera(GenICamCamera):
 
 
 def _camera_id(arv, owner: str, device: dict) -> str:
-    if "id" in device or "address" in device:
-        return str(device.get("id", device.get("address")))
+    if "address" in device:
+        try:  # an IP literal: Aravis then talks to that address only (a name it cannot resolve
+            return str(ipaddress.IPv4Address(str(device["address"])))  # would start a discovery broadcast)
+        except ValueError:
+            raise RigError(f"camera {owner!r}: device address {device['address']!r} is not an IPv4 address") from None
+    if "id" in device:
+        return str(device["id"])
     for key in ("serial", "model", "user_id"):
         if key in device:
             found = [d for d in list_devices(arv) if str(d.get(key if key != "user_id" else "id")) == str(device[key])]

@@ -11,6 +11,7 @@ import numpy as np
 import pytest
 
 from rigs import Rig, RigDescription, RigError, Session
+from rigs.device import FrameTimeout
 
 try:
     from rigs.backends.aravis import import_aravis
@@ -166,3 +167,80 @@ def test_capture_session_records_frames_and_stream_statistics(tmp_path, capsys):
     assert main(["session", "info", str(out)]) == 0
     text = capsys.readouterr().out
     assert f"stream    cam0: n_completed_buffers {streams['cam0']['n_completed_buffers']}" in text
+
+
+@pytest.fixture
+def gige_camera():
+    """Aravis' fake GigE Vision camera on loopback (in-process, port 3956 of 127.0.0.1),
+    with a packet capture on every interface when we may open one (root)."""
+    import gc
+    import os
+
+    from netguard import PacketGuard
+
+    guard = PacketGuard() if os.geteuid() == 0 else None
+    gv = ARV.GvFakeCamera.new("lo", "GV01")
+    if not gv.is_running():
+        if guard is not None:
+            guard.close()
+        pytest.skip("Aravis' fake GigE camera could not bind 127.0.0.1:3956")
+    yield gv
+    del gv
+    gc.collect()
+    if guard is not None:
+        guard.close()
+        assert any(p[4] == 3956 for p in guard.packets), "the capture saw no GVCP traffic: it proves nothing"
+        assert not guard.offending(), f"GigE traffic beyond unicast on loopback: {guard.offending()[:5]}"
+
+
+def gige_rig(**camera) -> dict:
+    # 10 Hz: the fake GigE camera looks at its (one-flag) trigger register every 40 ms
+    return {"format": "studio.rig", "version": 1, "name": "gige", "frame_rate": 10.0,
+            "trigger": {"mode": "software"}, "sync": {"tolerance_ms": 50.0},
+            "cameras": {"cam0": {"backend": "aravis", "interfaces": ["GigEVision"],
+                                 "device": {"address": "127.0.0.1"}, "pixel_format": "Mono8",
+                                 "width": 64, "height": 48, **camera}}}  # fmt: skip
+
+
+def test_gige_software_trigger_packet_size_and_stream_statistics(gige_camera):
+    """Every software trigger of the rig's timer becomes one frame over GVSP on loopback; the
+    packet size is the one asked for; the GigE stream counters land in device_stats."""
+    with Rig.open(gige_rig(packet_size=1000, packet_resend=True, buffers=16)) as rig:
+        cam = rig.cameras["cam0"]
+        assert cam.node("GevSCPSPacketSize") == 1000
+        mfs = list(rig.multiframes(6, timeout=2.0))
+        trigger = cam._trigger
+        trigger.disarm("cam0")  # no more triggers: fetch what is still on its way
+        while True:
+            try:
+                with cam.fetch(timeout=0.5):
+                    pass
+            except FrameTimeout:
+                break
+        stats = cam.device_stats()
+        delivered = cam.stats.delivered
+    assert [mf.frame_ids["cam0"] for mf in mfs] == list(range(6))
+    for mf in mfs:
+        ramp_offset(mf.images["cam0"])
+    assert delivered == trigger.fired == stats["triggers"] == stats["n_completed_buffers"], stats
+    assert stats["n_missing_packets"] == 0 and stats["n_failures"] == 0
+    assert stats["n_received_packets"] >= 6 * 4  # 3072-byte frames in 1000-byte packets + leader/trailer
+    assert {"n_resent_packets", "n_resend_requests"} <= set(stats)
+
+
+def test_gige_address_must_be_an_ip_literal():
+    with pytest.raises(RigError, match=r"device address 'camera.local' is not an IPv4 address"):
+        Rig.open(gige_rig(device={"address": "camera.local"}))
+
+
+def test_studio_devices_lists_the_fake_camera(capsys):
+    from studio.cli import main
+
+    assert main(["devices", "--backend", "aravis", "--aravis-interfaces", "Fake", "--json"]) == 0
+    out = json.loads(capsys.readouterr().out)
+    assert out["unavailable"] == {}
+    assert out["devices"]["aravis"] == [{"id": "Fake_1", "vendor": "Aravis", "model": "Fake", "serial": "1",
+                                         "interface": "Fake", "address": "0.0.0.0", "pixel_format": "Mono8"}]
+    assert main(["devices", "--backend", "aravis", "--aravis-interfaces", "Firewire"]) == 0
+    assert ("aravis: unavailable — aravis backend: option interfaces ['Firewire']: expected a list of "
+            "['Fake', 'USB3Vision', 'GigEVision']") in capsys.readouterr().out

@@ -4,6 +4,7 @@ no device timestamps)."""
 
 from __future__ import annotations
 
+import json
 from pathlib import Path
 
 import numpy as np
@@ -89,3 +90,14 @@ def test_no_producer_is_explained(monkeypatch):
     monkeypatch.setenv("GENICAM_GENTL64_PATH", str(VIKY.parent))
     with Rig.open(d) as rig:
         assert rig.cameras["cam0"].node("PixelFormat") == "RGBa8"
+
+
+def test_studio_devices_lists_viky_and_explains_a_missing_producer(capsys, monkeypatch):
+    from studio.cli import main
+
+    assert main(["devices", "--backend", "genicam", "--producer", str(VIKY), "--json"]) == 0
+    rows = json.loads(capsys.readouterr().out)["devices"]["genicam"]
+    assert [(r["model"], r["serial"], r["pixel_format"]) for r in rows] == [("Viky", s, "RGBa8") for s in "012"]
+    monkeypatch.delenv("GENICAM_GENTL64_PATH", raising=False)
+    assert main(["devices", "--backend", "genicam"]) == 0
+    assert "genicam: unavailable — genicam backend: no GenTL producer" in capsys.readouterr().out

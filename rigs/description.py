@@ -7,9 +7,10 @@ Format (version 1)::
     name: simulated
     frame_rate: 60.0                  # Hz, the trigger rate
     trigger:
-      mode: software                  # software | hardware | free-run
+      mode: software                  # software | hardware | free-run | action
       line: Line0                     # hardware trigger input (mode: hardware)
       selector: FrameStart
+      action: {device_key: 1, group_key: 1, group_mask: 1}   # mode: action (GigE Vision)
     sync:
       ptp: true                       # cameras' clocks are IEEE 1588 synchronised
       tolerance_ms: 2.0               # max timestamp spread of one instant (SyncGroup)
@@ -53,7 +54,9 @@ __all__ = ["CameraConfig", "RigDescription", "SyncConfig", "TriggerConfig"]
 
 FORMAT = "studio.rig"
 VERSION = 1
-TRIGGER_MODES = ("software", "hardware", "free-run")
+TRIGGER_MODES = ("software", "hardware", "free-run", "action")
+#: the action-command keys of ``trigger: {mode: action}`` (GigE Vision: 32-bit each)
+ACTION_KEYS = ("device_key", "group_key", "group_mask")
 PATH_OPTIONS = ("source", "session")
 _TOP_KEYS = {
     "format", "version", "name", "frame_rate", "trigger", "sync", "calibration", "cameras",
@@ -64,19 +67,21 @@ _CAMERA_KEYS = {"backend", "device", "pixel_format", "width", "height", "exposur
 
 @dataclass(frozen=True)
 class TriggerConfig:
-    """How exposures are started: ``software`` (host timer), ``hardware`` (input ``line``), or
-    ``free-run`` (each camera's own clock)."""
+    """How exposures are started: ``software`` (host timer), ``hardware`` (input ``line``),
+    ``free-run`` (each camera's own clock) or ``action`` (GigE Vision action commands, one
+    per tick for the whole rig, matched by the ``action`` keys)."""
 
     mode: str = "software"
     line: str | None = None
     selector: str = "FrameStart"
+    action: dict[str, int] | None = None
 
     @property
     def genicam(self) -> dict[str, str]:
         """The GenICam trigger features this mode maps to."""
         if self.mode == "free-run":
             return {"TriggerMode": "Off"}
-        source = "Software" if self.mode == "software" else self.line
+        source = {"software": "Software", "action": "Action1"}.get(self.mode, self.line)
         return {"TriggerMode": "On", "TriggerSelector": self.selector, "TriggerSource": source}
 
 
@@ -291,7 +296,14 @@ class RigDescription:
         selector = t.get("selector", "FrameStart")
         if selector != "FrameStart":
             raise _err(where, "trigger.selector", f"only 'FrameStart' is supported, got {selector!r}")
-        return TriggerConfig(mode, line, selector)
+        action = None
+        if mode == "action":
+            a = t.get("action") or {}
+            if not isinstance(a, Mapping) or set(a) - set(ACTION_KEYS):
+                raise _err(where, "trigger.action", f"expected a mapping of {list(ACTION_KEYS)}, got {a!r}")
+            action = {k: int(_number(where, f"trigger.action.{k}", a.get(k, 1), positive=False, low=0,
+                                     high=0xFFFFFFFF, integer=True)) for k in ACTION_KEYS}  # fmt: skip
+        return TriggerConfig(mode, line, selector, action)
 
     @staticmethod
     def _sync(where: str, s: Any) -> SyncConfig:

@@ -74,7 +74,7 @@ PIXEL_FORMATS: dict[str, tuple[int, type]] = {
     "RGB16": (3, np.uint16),
 }
 
-_TRIGGER_SOURCES = ("Software", "Line0", "Line1", "Line2", "Line3", "Action0")
+_TRIGGER_SOURCES = ("Software", "Line0", "Line1", "Line2", "Line3", "Action0", "Action1")
 
 #: GenICam feature name -> (python type, allowed values or None)
 FEATURES: dict[str, tuple[type, tuple | None]] = {

@@ -23,7 +23,11 @@ the same for every driver:
   16-bit GigE Vision wrap and counted from the run's first frame, so cameras armed before the
   first trigger agree.
 - **triggers.** ``TriggerSource=Software``: the rig's :class:`~rigs.backends._trigger.SoftwareTrigger`
-  fires ``TriggerSoftware`` on all cameras together.
+  fires ``TriggerSoftware`` on all cameras together. ``trigger: {mode: action}``: every camera
+  gets ``ActionDeviceKey``, ``ActionSelector=1``, ``ActionGroupKey``, ``ActionGroupMask`` and
+  ``TriggerSource=Action1``; the same timer has the rig's first camera's transport issue one
+  action command per tick (a GigE Vision broadcast from its GenTL interface), which every
+  camera whose keys match answers with an exposure.
 
 Options (rig YAML camera keys): ``buffers`` (driver buffers, default 8), ``timeout``
 (default fetch timeout in s, default 1), ``debayer`` (default true), ``chunks`` (default
@@ -40,11 +44,12 @@ import weakref
 from dataclasses import dataclass
 from typing import Any
 
-from rigs.backends._trigger import SoftwareTrigger
+from rigs.backends._trigger import SoftwareTrigger, shared_trigger
 from rigs.device import FEATURES, CameraDevice, Frame, FrameTimeout, RigError
 from rigs.pixelformats import SENSOR_FORMATS, bayer_pattern, to_image
 
-__all__ = ["GENICAM_FEATURES", "GenICamCamera", "RawBuffer", "Transport", "common_options", "unwrap_frame_id"]
+__all__ = ["GENICAM_FEATURES", "GenICamCamera", "RawBuffer", "Transport", "camera_arguments", "common_options",
+           "unwrap_frame_id"]
 
 log = logging.getLogger(__name__)
 
@@ -118,6 +123,11 @@ class Transport(abc.ABC):
     def requeue(self, buffer: RawBuffer) -> None: ...
     def statistics(self) -> dict[str, int]:
         return {}
+    def action_issuer(self) -> str | None:
+        """None when :meth:`issue_action` works, else why not (one line)."""
+        return f"{type(self).__name__} cannot issue action commands"
+    def issue_action(self, device_key: int, group_key: int, group_mask: int) -> None:
+        raise RigError(self.action_issuer() or "action commands are not supported")
     @abc.abstractmethod
     def close(self) -> None:
         """Release the device (idempotent)."""
@@ -125,6 +135,22 @@ class Transport(abc.ABC):
 
 #: transports not closed yet; closed at interpreter exit (an interrupted script leaks no device)
 _OPEN: weakref.WeakSet = weakref.WeakSet()
+
+
+def camera_arguments(config, description, shared: dict | None) -> tuple[dict[str, Any], dict[str, Any]]:
+    """The features of a rig camera and the synchronisation arguments of :class:`GenICamCamera`
+    (the rig's software-trigger timer, the action keys, whether this camera issues actions)."""
+    features = config.features(description.frame_rate, description.trigger, description.sync.ptp)
+    trigger = description.trigger
+    return features, {
+        "trigger": shared_trigger(shared, description.frame_rate, len(description.cameras)),
+        "action": trigger.action if trigger.mode == "action" else None,
+        "issuer": config.name == next(iter(description.cameras)),
+    }
+
+
+def _nothing() -> None:
+    """The timer callback of a camera that an action command issued by another one triggers."""
 
 
 def close_leftovers() -> int:
@@ -192,8 +218,11 @@ class GenICamCamera(CameraDevice):
     feature_rules = GENICAM_FEATURES
 
     def __init__(self, name: str, features: dict[str, Any], transport: Transport, options: dict, *,
-                 trigger: SoftwareTrigger | None = None, info: dict | None = None):  # fmt: skip
+                 trigger: SoftwareTrigger | None = None, info: dict | None = None,
+                 action: dict[str, int] | None = None, issuer: bool = False):  # fmt: skip
         self.transport = transport
+        self.action = action
+        self.issuer = bool(issuer)
         _OPEN.add(transport)
         self.options = options
         self.info = dict(info or {})
@@ -212,6 +241,8 @@ class GenICamCamera(CameraDevice):
                 self.set_node("TriggerActivation", options["trigger_activation"])
             if options["chunks"]:
                 self._enable_chunks()
+            if action is not None:
+                self._arm_action_keys()
         except BaseException:
             self._close()
             raise
@@ -335,21 +366,36 @@ class GenICamCamera(CameraDevice):
                 self.set_node("ChunkSelector", chunk)
                 self.set_node("ChunkEnable", True)
 
+    def _arm_action_keys(self) -> None:
+        """Device side of action commands; the issuer's transport must be able to send them."""
+        self.set_node("ActionDeviceKey", self.action["device_key"])
+        if self.transport.kind("ActionSelector") is not None:
+            self.set_node("ActionSelector", 1)
+        self.set_node("ActionGroupKey", self.action["group_key"])
+        self.set_node("ActionGroupMask", self.action["group_mask"])
+        why = self.transport.action_issuer() if self.issuer else None
+        if why is not None:
+            raise RigError(f"camera {self.name!r}: trigger mode action: {why}; use mode software or hardware")
+
     def _start(self) -> None:
         self._ids = (None, None)
         self._first_id = None
         self.transport.start(int(self.options["buffers"]))
-        if self._software_triggered:
-            self._trigger.arm(self.name, self._fire)
-
-    @property
-    def _software_triggered(self) -> bool:
-        return (self._trigger is not None and self._features.get("TriggerMode") == "On"
-                and self._features.get("TriggerSource") == "Software")  # fmt: skip
+        source = self._features.get("TriggerSource")
+        if self._trigger is not None and self._features.get("TriggerMode") == "On":
+            if source == "Software":
+                self._trigger.arm(self.name, self._fire)
+            elif self.action is not None and str(source).startswith("Action"):
+                self._trigger.arm(self.name, self._fire_action if self.issuer else _nothing)
 
     def _fire(self) -> None:
         self.transport.execute("TriggerSoftware")
         self._counters["triggers"] += 1
+
+    def _fire_action(self) -> None:
+        a = self.action
+        self.transport.issue_action(a["device_key"], a["group_key"], a["group_mask"])
+        self._counters["actions"] = self._counters.get("actions", 0) + 1
 
     def _stop(self) -> None:
         try:

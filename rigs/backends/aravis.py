@@ -28,8 +28,7 @@ import ipaddress
 import logging
 from typing import Any
 
-from rigs.backends._genapi import GenICamCamera, RawBuffer, Transport, common_options
-from rigs.backends._trigger import shared_trigger
+from rigs.backends._genapi import GenICamCamera, RawBuffer, Transport, camera_arguments, common_options
 from rigs.device import RigError
 
 __all__ = ["AravisCamera", "AravisTransport", "import_aravis", "list_devices", "open_camera"]
@@ -200,6 +199,9 @@ class AravisTransport(Transport):
     def enable_chunk_parser(self) -> None:
         self.chunk_parser = self.camera.create_chunk_parser()
 
+    def action_issuer(self) -> str | None:
+        return "Aravis 0.8 has no API to issue GigE Vision action commands"
+
     def close(self) -> None:
         self.stop()
         self.chunk_parser = None
@@ -249,11 +251,10 @@ def open_camera(config, description, *, epoch_ns: int, shared: dict | None = Non
         transport.resend = gige.get("packet_resend", True) if transport.camera.is_gv_device() else None
         if options["chunks"]:
             transport.enable_chunk_parser()
-        features = config.features(description.frame_rate, description.trigger, description.sync.ptp)
-        trigger = shared_trigger(shared, description.frame_rate, len(description.cameras))
+        features, sync = camera_arguments(config, description, shared)
         info = {"vendor": transport.camera.get_vendor_name(), "model": transport.camera.get_model_name(),
                 "serial": transport.camera.get_device_serial_number()}  # fmt: skip
     except BaseException:
         transport.close()
         raise
-    return AravisCamera(name, features, transport, options, trigger=trigger, info=info)
+    return AravisCamera(name, features, transport, options, info=info, **sync)

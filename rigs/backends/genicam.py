@@ -27,8 +27,7 @@ from typing import Any
 
 import numpy as np
 
-from rigs.backends._genapi import GenICamCamera, RawBuffer, Transport, common_options
-from rigs.backends._trigger import shared_trigger
+from rigs.backends._genapi import GenICamCamera, RawBuffer, Transport, camera_arguments, common_options
 from rigs.device import RigError
 
 __all__ = ["GenTLCamera", "HarvesterTransport", "open_camera", "open_harvester", "producer_files"]
@@ -162,6 +161,27 @@ class HarvesterTransport(Transport):
     def statistics(self) -> dict[str, int]:
         return dict(self._counts)
 
+    def _action_nodes(self):
+        """The node map of the GenTL interface (or system) module that sends action commands."""
+        interface = self.acquirer.device.parent
+        for module in (interface, interface.parent):
+            nodes = module.node_map
+            if nodes is not None and nodes.has_node("ActionCommand"):
+                return nodes
+        return None
+
+    def action_issuer(self) -> str | None:
+        if self._action_nodes() is None:
+            return "the GenTL producer has no ActionCommand node on its interface or system module"
+        return None
+
+    def issue_action(self, device_key: int, group_key: int, group_mask: int) -> None:
+        nodes = self._action_nodes()
+        nodes.ActionDeviceKey.value = int(device_key)
+        nodes.ActionGroupKey.value = int(group_key)
+        nodes.ActionGroupMask.value = int(group_mask)
+        nodes.ActionCommand.execute()
+
     def close(self) -> None:
         if self.acquirer is None:
             return
@@ -205,10 +225,9 @@ def open_camera(config, description, *, epoch_ns: int, shared: dict | None = Non
         if entry["users"] <= 0:
             entry["harvester"].reset()
         raise
-    features = config.features(description.frame_rate, description.trigger, description.sync.ptp)
-    trigger = shared_trigger(shared, description.frame_rate, len(description.cameras))
+    features, sync = camera_arguments(config, description, shared)
     info = {}
     for key, node in (("vendor", "DeviceVendorName"), ("model", "DeviceModelName"), ("serial", "DeviceSerialNumber")):
         if transport.kind(node) is not None:
             info[key] = str(transport.read(node))
-    return GenTLCamera(name, features, transport, options, trigger=trigger, info=info)
+    return GenTLCamera(name, features, transport, options, info=info, **sync)

@@ -21,8 +21,7 @@ import time
 import numpy as np
 
 from rigs.backends import register_backend
-from rigs.backends._genapi import GenICamCamera, RawBuffer, Transport, common_options
-from rigs.backends._trigger import shared_trigger
+from rigs.backends._genapi import GenICamCamera, RawBuffer, Transport, camera_arguments, common_options
 from rigs.pixelformats import SENSOR_FORMATS, mosaic
 
 FORMATS = ["Mono8", "Mono12", "Mono12p", "Mono12Packed", "Mono16", "RGB8", "BGR8",
@@ -74,27 +73,32 @@ class FakeTransport(Transport):
                        "TriggerSelector": "FrameStart", "TriggerMode": "Off", "TriggerSource": "Software",
                        "TriggerActivation": "RisingEdge", "LineSelector": "Line0", "LineMode": "Input",
                        "GevIEEE1588": False, "GevIEEE1588Status": "Disabled", "ChunkModeActive": False,
-                       "ChunkSelector": "Timestamp", "ChunkEnable": False, "DeviceModelName": "FakeGenTL"}
+                       "ChunkSelector": "Timestamp", "ChunkEnable": False, "DeviceModelName": "FakeGenTL",
+                       "ActionDeviceKey": 0, "ActionSelector": 1, "ActionGroupKey": 0, "ActionGroupMask": 0}
         self.kinds = {"Width": "int", "Height": "int", "OffsetX": "int", "OffsetY": "int", "PixelFormat": "enum",
                       "ExposureTime": "float", "Gain": "float", "AcquisitionFrameRate": "float",
                       "TriggerSelector": "enum", "TriggerMode": "enum", "TriggerSource": "enum",
                       "TriggerActivation": "enum", "TriggerSoftware": "command", "LineSelector": "enum",
                       "LineMode": "enum", "GevIEEE1588": "bool", "GevIEEE1588Status": "enum",
                       "ChunkModeActive": "bool", "ChunkSelector": "enum", "ChunkEnable": "bool",
-                      "DeviceModelName": "string"}
+                      "DeviceModelName": "string", "ActionDeviceKey": "int", "ActionSelector": "int",
+                      "ActionGroupKey": "int", "ActionGroupMask": "int"}
         self.enums = {"PixelFormat": FORMATS, "TriggerSelector": ["FrameStart"], "TriggerMode": ["Off", "On"],
-                      "TriggerSource": ["Software", "Line0", "Line1"], "TriggerActivation": ["RisingEdge", "FallingEdge"],
+                      "TriggerSource": ["Software", "Line0", "Line1", "Action1"], "TriggerActivation": ["RisingEdge", "FallingEdge"],
                       "LineSelector": ["Line0", "Line1"], "LineMode": ["Input", "Output"],
                       "GevIEEE1588Status": ["Disabled", "Listening", "Slave", "Master"],
                       "ChunkSelector": ["Timestamp", "FrameID"]}
         self.ranges = {"Width": (8, 256), "Height": (8, 256), "OffsetX": (0, 248), "OffsetY": (0, 248),
-                       "ExposureTime": (10.0, 1e6), "Gain": (0.0, 24.0), "AcquisitionFrameRate": (1.0, 500.0)}  # fmt: skip
+                       "ExposureTime": (10.0, 1e6), "Gain": (0.0, 24.0), "AcquisitionFrameRate": (1.0, 500.0),
+                       "ActionDeviceKey": (0, 0xFFFFFFFF), "ActionSelector": (0, 7), "ActionGroupKey": (0, 0xFFFFFFFF),
+                       "ActionGroupMask": (0, 0xFFFFFFFF)}  # fmt: skip
         self.block_id = first_id - 1
         self.clock_offset_ns = int(clock_offset_ns)
         self.ptp_lock_s = ptp_lock_s
         self._ptp_since: float | None = None
         self.stats = collections.Counter(n_completed_buffers=0, n_underruns=0)
         self.exposures = 0
+        self.actions_issued = 0
         self.streaming = False
         self.closed = False
         self._free = 0
@@ -132,6 +136,20 @@ class FakeTransport(Transport):
             raise RuntimeError(f"unknown command {node}")
         if self.values["TriggerMode"] == "On" and self.values["TriggerSource"] == "Software":
             self._expose()
+
+    def action_issuer(self):
+        return None
+
+    def issue_action(self, device_key, group_key, group_mask):
+        """A GigE Vision action command on the fake network: every streaming fake whose keys
+        match (device key equal, group key equal, group masks overlapping) exposes."""
+        self.actions_issued += 1
+        for t in CREATED:
+            v = t.values
+            if (v["TriggerMode"] == "On" and v["TriggerSource"] == f"Action{v['ActionSelector']}"
+                    and v["ActionDeviceKey"] == device_key and v["ActionGroupKey"] == group_key
+                    and v["ActionGroupMask"] & group_mask):  # fmt: skip
+                t._expose()
 
     def pulse(self, line: str = "Line0") -> None:
         """An edge on input ``line`` (a hardware trigger)."""
@@ -216,9 +234,8 @@ def open_camera(config, description, *, epoch_ns, shared=None):
     options = common_options(config.name, "fake-gentl", dict(config.options), set())
     transport = FakeTransport(**DEVICES.get(str(config.device.get("id")), {}))
     CREATED.append(transport)
-    features = config.features(description.frame_rate, description.trigger, description.sync.ptp)
-    trigger = shared_trigger(shared, description.frame_rate, len(description.cameras))
-    return FakeGenTLCamera(config.name, features, transport, options, trigger=trigger)
+    features, sync = camera_arguments(config, description, shared)
+    return FakeGenTLCamera(config.name, features, transport, options, **sync)
 
 
 register_backend("fake-gentl", open_camera)

@@ -244,3 +244,44 @@ def test_studio_devices_lists_the_fake_camera(capsys):
     assert main(["devices", "--backend", "aravis", "--aravis-interfaces", "Firewire"]) == 0
     assert ("aravis: unavailable — aravis backend: option interfaces ['Firewire']: expected a list of "
             "['Fake', 'USB3Vision', 'GigEVision']") in capsys.readouterr().out
+
+
+def test_capture_killed_at_a_random_instant_leaves_a_readable_session(tmp_path):
+    import os
+    import signal
+    import subprocess
+    import sys
+
+    out = tmp_path / "killed"
+    kill_after = int(np.random.default_rng(16).integers(3, 15))  # rows on disk when SIGKILL lands
+    child = subprocess.Popen([sys.executable, "-m", "studio", "capture", "--rig", str(RIG_YAML), "--out", str(out),
+                              "--frames", "100000"], stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)  # fmt: skip
+    try:
+        deadline, rows = time.monotonic() + 60, 0
+        while time.monotonic() < deadline and child.poll() is None and rows < kill_after:
+            try:
+                rows = (out / "frames.csv").read_text().count("\n") - 1
+            except OSError:
+                rows = 0
+            time.sleep(0.01)
+        assert child.poll() is None, child.stderr.read().decode()
+        os.kill(child.pid, signal.SIGKILL)
+    finally:
+        child.kill()
+        child.wait(10)
+        child.stderr.close()
+    s = Session.open(out)
+    assert s.status == "recording" and len(s.frame_indices) >= kill_after
+    assert s.frame_indices == list(range(len(s.frame_indices)))
+    for i in s.frame_indices:
+        for cam in ("cam0", "cam1"):
+            ramp_offset(s.image(cam, i))
+    ids = [s.frame_meta(i)["frame_ids"]["cam0"] for i in s.frame_indices]
+    assert all(b > a for a, b in zip(ids, ids[1:]))
+
+
+def test_action_mode_is_refused_with_the_reason():
+    d = _as_dict()
+    d["trigger"] = {"mode": "action"}
+    with pytest.raises(RigError, match=r"node TriggerSource='Action1' refused: allowed values are Line0, Software"):
+        Rig.open(d)

@@ -217,3 +217,40 @@ def test_unwrap_frame_id_across_the_gige_wrap():
         last_raw = raw
         out.append(last)
     assert out == [65533, 65534, 65535, 65536, 65537, 65539]
+
+
+def test_action_commands_trigger_every_matching_camera_from_one_issuer():
+    """trigger mode action: cam0's transport issues one action command per tick; all three
+    cameras (keys matching) expose on each; a camera with another group key never does."""
+    d = fake_rig(3, trigger={"mode": "action", "action": {"device_key": 7, "group_key": 2, "group_mask": 1}})
+    with Rig.open(d) as rig:
+        ts = [c.transport for c in rig.cameras.values()]
+        assert ts[1].values["ActionDeviceKey"] == 7 and ts[1].values["TriggerSource"] == "Action1"
+        mfs = list(rig.multiframes(10))
+        trigger = rig.cameras["cam0"]._trigger
+        trigger.disarm("cam0")
+        issued = ts[0].actions_issued
+        ts[2].values["ActionGroupKey"] = 3  # no longer in the group
+        rig.cameras["cam0"].transport.issue_action(7, 2, 1)
+    assert [mf.frame_ids["cam2"] for mf in mfs] == list(range(10))
+    assert issued == trigger.fired and [t.actions_issued for t in ts[1:]] == [0, 0]
+    assert [t.exposures for t in ts] == [issued + 1, issued + 1, issued]
+
+
+def test_action_mode_needs_the_keys_and_an_issuer():
+    from rigs import RigDescription
+
+    with pytest.raises(RigError, match=r"field 'trigger.action.group_mask': expected an integer between 0 and "):
+        RigDescription.from_dict(fake_rig(1, trigger={"mode": "action", "action": {"group_mask": -1}}))
+    with pytest.raises(RigError, match=r"field 'trigger.action': expected a mapping of \['device_key'"):
+        RigDescription.from_dict(fake_rig(1, trigger={"mode": "action", "action": {"key": 1}}))
+    d = fake_rig(1, trigger={"mode": "action"})
+    fake_gentl.DEVICES["dev0"] = {}
+    original = fake_gentl.FakeTransport.action_issuer
+    try:
+        fake_gentl.FakeTransport.action_issuer = lambda self: "this fake cannot send them"
+        with pytest.raises(RigError, match="camera 'cam0': trigger mode action: this fake cannot send them; use mode "
+                                           "software or hardware"):
+            Rig.open(d)
+    finally:
+        fake_gentl.FakeTransport.action_issuer = original

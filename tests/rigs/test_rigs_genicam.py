@@ -101,3 +101,19 @@ def test_studio_devices_lists_viky_and_explains_a_missing_producer(capsys, monke
     monkeypatch.delenv("GENICAM_GENTL64_PATH", raising=False)
     assert main(["devices", "--backend", "genicam"]) == 0
     assert "genicam: unavailable — genicam backend: no GenTL producer" in capsys.readouterr().out
+
+
+def test_action_commands_need_a_producer_that_sends_them():
+    d = viky_rig(("0",))
+    d["trigger"] = {"mode": "action"}
+    with pytest.raises(RigError, match=r"TriggerMode='On' cannot be set: the device has no GenApi node TriggerMode"):
+        Rig.open(d)
+    from rigs.backends.genicam import HarvesterTransport, open_harvester
+
+    entry = open_harvester(None, [VIKY])
+    transport = HarvesterTransport(entry, 0, "probe")
+    try:
+        assert transport.action_issuer() == ("the GenTL producer has no ActionCommand node on its interface or "
+                                             "system module")
+    finally:
+        transport.close()

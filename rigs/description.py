@@ -22,15 +22,17 @@ Format (version 1)::
       pixel_format: RGB8
     cameras:
       cam0:
-        backend: simulated            # simulated | replay | (later) genicam, aravis
+        backend: simulated            # simulated | replay | genicam | aravis
         device: {id: sim0}            # id / serial / address, whichever the backend uses
-        pixel_format: RGB8            # RGB8 | Mono8 | RGB16 | Mono16
+        pixel_format: RGB8            # RGB8 | Mono8 | RGB16 | Mono16; GenICam backends: any
+                                      # format of rigs.pixelformats (BayerRG8, Mono12p, ...)
         width: 656
         height: 490
         exposure: 10000               # µs (GenICam ExposureTime)
         gain: 0.0                     # dB (GenICam Gain)
         # any other key is a backend option (simulated: source, jitter_ms, drop_probability,
-        # drop_frames, duplicate_frames, realtime, loop, seed; replay: session, realtime, loop)
+        # drop_frames, duplicate_frames, realtime, loop, seed; replay: session, realtime, loop;
+        # genicam/aravis: buffers, timeout, debayer, chunks, nodes, ... — rigs/backends/_genapi.py)
 
 Relative paths (``calibration``, and the backend options ``source`` and ``session``) are
 resolved against the folder of the YAML file. Errors name the file and the field.

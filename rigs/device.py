@@ -1,6 +1,6 @@
 """The camera interface every backend implements, and the frame it delivers.
 
-A backend (``simulated``, ``replay``; later ``genicam`` through harvesters and ``aravis``)
+A backend (``simulated``, ``replay``, ``genicam`` through harvesters, ``aravis``)
 subclasses :class:`CameraDevice` and fills in five hooks (``_apply``, ``_start``, ``_stop``,
 ``_next``, ``_close``). Features use GenICam standard names (SFNC) so that a GenTL camera's
 node map can be driven with the same calls:
@@ -10,20 +10,24 @@ feature                  meaning                                     type / unit
 =======================  ==========================================  ================
 ``Width``, ``Height``    region of interest size                     int, pixels
 ``OffsetX``, ``OffsetY`` region of interest origin                   int, pixels
-``PixelFormat``          ``RGB8``, ``Mono8``, ``RGB16``, ``Mono16``  str
+``PixelFormat``          ``RGB8``, ``Mono8``, ``RGB16``, ``Mono16``  str (GenICam backends:
+                                                                     any PFNC name of
+                                                                     :mod:`rigs.pixelformats`)
 ``ExposureTime``         exposure                                    float, µs
 ``Gain``                 analogue gain                               float, dB
 ``AcquisitionFrameRate`` frame (trigger) rate                        float, Hz
 ``TriggerMode``          ``On`` (triggered) / ``Off`` (free-run)      str
-``TriggerSource``        ``Software``, ``Line0`` .. ``Line3``         str
+``TriggerSource``        ``Software``, ``Line0`` .. ``Line3``,        str
+                         ``Action0``, ``Action1``
 ``TriggerSelector``      ``FrameStart``                              str
 ``GevIEEE1588``          PTP (IEEE 1588) clock synchronisation       bool
 =======================  ==========================================  ================
 
 Frames are leased, as harvesters' buffers are: ``with camera.fetch(timeout=1.0) as frame:``
 returns the buffer to the driver when the block exits. Copy ``frame.image`` to keep it
-beyond the block (the simulated and replay backends hand out fresh arrays, a GenTL backend
-will not).
+beyond the block (the simulated and replay backends hand out fresh arrays; a backend that
+lends driver memory sets ``buffers_reused``; the GenICam backends convert every buffer into a
+fresh array and return the buffer at once).
 """
 
 from __future__ import annotations

@@ -102,7 +102,7 @@ def test_refused_settings_name_node_and_allowed_values():
         Rig.open(fake_rig(1, width=100000))
     with pytest.raises(RigError, match=r"GevIEEE1588=True cannot be set: the device has no GenApi node "
                                        r"GevIEEE1588 or PtpEnable"):
-        Rig.open(fake_rig(1).__class__.from_dict({**_as_dict(), "sync": {"ptp": True}}))
+        Rig.open({**_as_dict(), "sync": {"ptp": True}})
     with pytest.raises(RigError, match=r"option chunks: the device has no GenApi node 'ChunkModeActive'"):
         Rig.open(fake_rig(1, chunks=True))
     with pytest.raises(RigError, match=r"options \['packet_size'\] apply to GigE Vision cameras only; 'Fake' is not one"):
@@ -247,29 +247,14 @@ def test_studio_devices_lists_the_fake_camera(capsys):
 
 
 def test_capture_killed_at_a_random_instant_leaves_a_readable_session(tmp_path):
-    import os
-    import signal
-    import subprocess
     import sys
+
+    from rigkit import kill_after_rows
 
     out = tmp_path / "killed"
     kill_after = int(np.random.default_rng(16).integers(3, 15))  # rows on disk when SIGKILL lands
-    child = subprocess.Popen([sys.executable, "-m", "studio", "capture", "--rig", str(RIG_YAML), "--out", str(out),
-                              "--frames", "100000"], stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)  # fmt: skip
-    try:
-        deadline, rows = time.monotonic() + 60, 0
-        while time.monotonic() < deadline and child.poll() is None and rows < kill_after:
-            try:
-                rows = (out / "frames.csv").read_text().count("\n") - 1
-            except OSError:
-                rows = 0
-            time.sleep(0.01)
-        assert child.poll() is None, child.stderr.read().decode()
-        os.kill(child.pid, signal.SIGKILL)
-    finally:
-        child.kill()
-        child.wait(10)
-        child.stderr.close()
+    kill_after_rows([sys.executable, "-m", "studio", "capture", "--rig", str(RIG_YAML), "--out", str(out),
+                     "--frames", "100000"], out, kill_after, timeout=60.0)  # fmt: skip
     s = Session.open(out)
     assert s.status == "recording" and len(s.frame_indices) >= kill_after
     assert s.frame_indices == list(range(len(s.frame_indices)))

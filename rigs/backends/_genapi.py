@@ -312,6 +312,11 @@ class GenICamCamera(CameraDevice):
         return None
 
     # -- CameraDevice hooks ------------------------------------------------------------
+    def fetch(self, timeout: float | None = None):
+        """Lease the next frame (see :meth:`rigs.CameraDevice.fetch`); ``timeout`` defaults to
+        the camera's ``timeout`` option."""
+        return super().fetch(float(self.options["timeout"]) if timeout is None else timeout)
+
     def configure(self, **features: Any) -> None:
         self._requested |= set(features)
         super().configure(**features)

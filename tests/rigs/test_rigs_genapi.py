@@ -73,14 +73,17 @@ def test_hardware_trigger_line_counts_frames_and_writes_activation():
 
 
 def test_stalled_stream_times_out_instead_of_hanging():
-    with Rig.open(fake_rig(1, trigger={"mode": "hardware", "line": "Line0"})) as rig:
+    with Rig.open(fake_rig(1, trigger={"mode": "hardware", "line": "Line0"}, timeout=0.2)) as rig:
         cam = rig.cameras["cam0"]
         cam.start()
         t0 = time.monotonic()
         with pytest.raises(FrameTimeout, match="camera 'cam0': no frame within 0.2 s"):
-            with cam.fetch(timeout=0.2):
+            with cam.fetch():  # the camera's timeout option
                 pass
         assert 0.15 < time.monotonic() - t0 < 1.0
+        with pytest.raises(FrameTimeout, match="no frame within 0.05 s"):
+            with cam.fetch(timeout=0.05):
+                pass
 
 
 def test_underruns_become_frame_id_gaps_and_sync_drops():
@@ -174,6 +177,14 @@ def test_refused_settings_name_the_node_and_the_allowed_values():
         Rig.open(fake_rig(1, nodes={"Gain": "x"}))
     with pytest.raises(RigError, match=r"option buffers must be an integer in 1..4096, got 0"):
         Rig.open(fake_rig(1, buffers=0))
+    with pytest.raises(RigError, match=r"option timeout must be a positive number of seconds, got 0"):
+        Rig.open(fake_rig(1, timeout=0))
+    with pytest.raises(RigError, match=r"option debayer must be true or false, got 'yes'"):
+        Rig.open(fake_rig(1, debayer="yes"))
+    with pytest.raises(RigError, match=r"option nodes must be a mapping of GenApi node -> value"):
+        Rig.open(fake_rig(1, nodes=["Gain"]))
+    with pytest.raises(RigError, match=r"unknown fake-gentl option 'bufers'; expected any of \['buffers'"):
+        Rig.open(fake_rig(1, bufers=4))
     with Rig.open(fake_rig(1, trigger={"mode": "free-run"})) as rig:
         cam = rig.cameras["cam0"]
         cam.configure(ExposureTime=2500.0, Gain=6.0)

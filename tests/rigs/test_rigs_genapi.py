@@ -265,3 +265,41 @@ def test_action_mode_needs_the_keys_and_an_issuer():
             Rig.open(d)
     finally:
         fake_gentl.FakeTransport.action_issuer = original
+
+
+def test_throttled_capture_records_underruns_as_drops_in_the_session(tmp_path, monkeypatch, capsys):
+    """studio capture with a consumer slower than the cameras: cam0 (2 buffers) loses
+    exposures, which become frame-id gaps, sync drops in session.json and in session info."""
+    import yaml
+
+    import rigs
+    from rigs import Session
+    from studio.cli import main
+
+    d = fake_rig(2, frame_rate=100.0)
+    d["cameras"]["cam0"]["buffers"] = 2
+    d["cameras"]["cam1"]["buffers"] = 256
+    rig_yaml = tmp_path / "rig.yaml"
+    rig_yaml.write_text(yaml.safe_dump(d))
+    submit = rigs.Recorder.submit
+
+    def slow_submit(self, mf):
+        time.sleep(0.03)  # a consumer slower than the 100 Hz trigger
+        return submit(self, mf)
+
+    monkeypatch.setattr(rigs.Recorder, "submit", slow_submit)
+    assert main(["capture", "--rig", str(rig_yaml), "--out", str(tmp_path / "s"), "--frames", "20"]) == 0
+    s = Session.open(tmp_path / "s")
+    drops, streams = s.drops, s.drops["streams"]
+    assert len(s.frame_indices) == 20
+    lost = drops["cameras"]["cam0"]["dropped"]
+    assert lost >= 5 and drops["cameras"]["cam1"]["dropped"] == 0 and drops["incomplete_instants"] == lost
+    assert lost <= streams["cam0"]["n_underruns"] and streams["cam1"]["n_underruns"] == 0
+    ids = [s.frame_meta(i)["frame_ids"]["cam0"] for i in s.frame_indices]
+    gaps = ids[-1] - ids[0] + 1 - len(ids)  # ids missing between the recorded frames
+    assert 1 <= gaps <= lost, "the lost exposures are gaps between recorded frame ids"
+    capsys.readouterr()
+    assert main(["session", "info", str(tmp_path / "s")]) == 0
+    out = capsys.readouterr().out
+    assert f"{lost} incomplete trigger instant(s) not in frames.csv" in out and f"cam0 dropped {lost}" in out
+    assert f"stream    cam0: n_completed_buffers {streams['cam0']['n_completed_buffers']}, n_underruns" in out

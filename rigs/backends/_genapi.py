@@ -137,15 +137,21 @@ class Transport(abc.ABC):
 _OPEN: weakref.WeakSet = weakref.WeakSet()
 
 
+#: backends that play stored frames and take no triggers from the rig's timer
+PLAYBACK_BACKENDS = ("simulated", "replay")
+
+
 def camera_arguments(config, description, shared: dict | None) -> tuple[dict[str, Any], dict[str, Any]]:
-    """The features of a rig camera and the synchronisation arguments of :class:`GenICamCamera`
-    (the rig's software-trigger timer, the action keys, whether this camera issues actions)."""
+    """The features of a rig camera and the synchronisation arguments of :class:`GenICamCamera`:
+    the rig's software-trigger timer (waiting for every live camera of the rig), the action
+    keys, and whether this camera issues the action commands (the rig's first live camera)."""
     features = config.features(description.frame_rate, description.trigger, description.sync.ptp)
+    live = [n for n, c in description.cameras.items() if c.backend not in PLAYBACK_BACKENDS]
     trigger = description.trigger
     return features, {
-        "trigger": shared_trigger(shared, description.frame_rate, len(description.cameras)),
+        "trigger": shared_trigger(shared, description.frame_rate, len(live)),
         "action": trigger.action if trigger.mode == "action" else None,
-        "issuer": config.name == next(iter(description.cameras)),
+        "issuer": config.name == live[0],
     }
 
 

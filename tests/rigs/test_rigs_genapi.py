@@ -303,3 +303,19 @@ def test_throttled_capture_records_underruns_as_drops_in_the_session(tmp_path, m
     out = capsys.readouterr().out
     assert f"{lost} incomplete trigger instant(s) not in frames.csv" in out and f"cam0 dropped {lost}" in out
     assert f"stream    cam0: n_completed_buffers {streams['cam0']['n_completed_buffers']}, n_underruns" in out
+
+
+def test_software_trigger_waits_for_live_cameras_only(tmp_path):
+    """A rig mixing a simulated camera with two GenICam ones: the timer fires once both
+    GenICam cameras are armed (the simulated one paces itself)."""
+    from rigkit import make_source
+
+    d = fake_rig(2, sync={"tolerance_ms": None})
+    d["cameras"]["sim"] = {"backend": "simulated", "source": str(make_source(tmp_path / "src", cameras=("sim",))),
+                           "realtime": False, "pixel_format": "RGB8", "width": None, "height": None}  # fmt: skip
+    with Rig.open(d) as rig:
+        rig.start()
+        for name in ("cam0", "cam1"):
+            with rig.cameras[name].fetch(timeout=2.0) as frame:
+                assert frame.frame_id == 0
+        assert rig.cameras["cam0"]._trigger.expected == 2 and rig.cameras["cam0"].issuer

@@ -194,8 +194,9 @@ def gige_camera():
 
 
 def gige_rig(**camera) -> dict:
-    # 10 Hz: the fake GigE camera looks at its (one-flag) trigger register every 40 ms
-    return {"format": "studio.rig", "version": 1, "name": "gige", "frame_rate": 10.0,
+    # 5 Hz: the fake GigE camera looks at its (one-flag) trigger register every 40 ms, so
+    # two triggers closer than that would merge into one frame (a loaded machine delays it)
+    return {"format": "studio.rig", "version": 1, "name": "gige", "frame_rate": 5.0,
             "trigger": {"mode": "software"}, "sync": {"tolerance_ms": 50.0},
             "cameras": {"cam0": {"backend": "aravis", "interfaces": ["GigEVision"],
                                  "device": {"address": "127.0.0.1"}, "pixel_format": "Mono8",

@@ -117,3 +117,14 @@ def test_action_commands_need_a_producer_that_sends_them():
                                              "system module")
     finally:
         transport.close()
+
+
+def test_chunk_mode_on_a_producer_without_timestamp_chunks():
+    """viky's chunks carry no timestamp or frame id: chunk mode is on, frames still flow,
+    stamped by the host clock (counted), not by a chunk."""
+    with Rig.open(viky_rig(("1",), chunks=True)) as rig:
+        cam = rig.cameras["cam1"]
+        assert cam.node("ChunkModeActive") is True
+        mfs = list(rig.multiframes(3, timeout=3.0))
+        stats = cam.device_stats()
+    assert len(mfs) == 3 and stats["chunk_timestamps"] == 0 and stats["host_timestamps"] >= 3

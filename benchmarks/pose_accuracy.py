@@ -3,7 +3,7 @@
 Generated people (Anny's population model, seeds from 1000 up, never used for tuning: both
 sexes, adult ages, Anny's WHO-calibrated statures and BMIs), each in several postures a lab
 records (``studio.simulate.truth_build.LAB_POSES``: every family represented, jittered,
-random heading), several skin tones and garment colours, rendered by the simulator with 4
+random heading; ``seated`` on a stool the silhouettes hold too), several skin tones and garment colours, rendered by the simulator with 4
 cameras, segmented, and every frame fitted ALONE from its silhouettes (no tracking, true
 sex). Per posture family: mean surface distance fitted ↔ true mesh (median, 90th percentile,
 worst), stature error (the fitted shape measured like the truth), silhouette precision /
@@ -11,7 +11,10 @@ recall against the true labels, joint error (eq. 4.17), time per frame, and the 
 frames the quality gates call ``ok``.
 
 Variants (``--variant``, one results folder each, so the gain of every part shows side by
-side): ``full`` (library start), ``no-library`` (the stride start of the first wave).
+side): ``full`` (library start), ``no-library`` (the stride start of the first wave),
+``no-rival`` (no search from the opposite heading), ``no-limb`` (no per-limb re-search),
+``no-support`` (a seated person's stool fitted as body). ``--families`` fits only the frames
+of the named posture families (e.g. ``--families seated`` for ``no-support``).
 
 Steps (resumable: every fitted frame is cached as JSON, a rerun fits only what is missing):
 
@@ -37,7 +40,8 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
 FIRST_SEED = 1000  # held-out people: seeds from here up are only ever measured
-VARIANTS = {"full": {}, "no-library": {"start": "stride"}, "no-rival": {"rival_heading": False}}
+VARIANTS = {"full": {}, "no-library": {"start": "stride"}, "no-rival": {"rival_heading": False},
+            "no-limb": {"limb_particles": 0}, "no-support": {"find_support": False}}
 STANDING = ("a_pose", "t_pose", "arms_overhead", "hands_on_hips", "arm_forward", "arms_crossed", "wide_stance",
             "torso_twist")
 
@@ -161,6 +165,8 @@ def run(args) -> int:
         session = ensure_rendered(spec, seed=0)
         segment_session(session, workers=1)
         for f, fam in enumerate(p["poses"]):
+            if args.families and fam not in args.families:
+                continue
             key = {"person": p["name"], "frame": f, "family": fam, "sex": "female" if p["gender"] else "male"}
             if not (out / f"{p['name']}_{f}.json").is_file():
                 jobs.append({"session": str(session), "frame": f, "key": key, "options": VARIANTS[args.variant]})
@@ -239,6 +245,7 @@ def main(argv=None) -> int:
     ap.add_argument("--poses", type=int, default=4, help="postures per person")
     ap.add_argument("--variant", choices=tuple(VARIANTS), default="full")
     ap.add_argument("--workers", type=int, default=2)
+    ap.add_argument("--families", nargs="*", default=None, help="fit only the frames of these posture families")
     args = ap.parse_args(argv)
     return {"build": build, "run": run, "table": table}[args.step](args)
 

@@ -36,13 +36,20 @@ class RigCalibration:
     ========================  =================================  ==========================
 
     Every format keeps each camera's lens model (``Camera.model``, pinhole or fisheye).
-    :meth:`load_any` picks the reader from the path. ``rig[name]`` gives a camera;
-    iterating a rig yields its :class:`Camera` objects in rig order.
+    :meth:`load_any` picks the reader from the path and reads every format of
+    :mod:`calibration.formats` (Caliscope, multical, Kalibr, Vicon, OptiTrack, per-camera
+    OpenCV files, ...); :meth:`from_camera_files` reads ``{name: file}`` pairs. Every load
+    converts to metres and world Z up and says what it read and assumed in ``notes``
+    (:mod:`calibration.formats.checks`). ``rig[name]`` gives a camera; iterating a rig
+    yields its :class:`Camera` objects in rig order.
     """
 
     cameras: dict[str, Camera]
     ground: GroundPlane = field(default_factory=GroundPlane.floor)
     metadata: dict = field(default_factory=dict)
+    #: What the load that made this rig read and assumed (units, up axis, conventions);
+    #: sentences, warnings start with ``"warning:"``. Empty for rigs built in code.
+    notes: tuple[str, ...] = ()
 
     def __post_init__(self) -> None:
         cams = self.cameras
@@ -69,6 +76,7 @@ class RigCalibration:
             )
         object.__setattr__(self, "cameras", dict(cams))
         object.__setattr__(self, "metadata", dict(self.metadata))
+        object.__setattr__(self, "notes", tuple(str(n) for n in self.notes))
 
     # ------------------------------------------------------------------ access
     @property
@@ -117,15 +125,29 @@ class RigCalibration:
         )
 
     # ------------------------------------------------------------------ files (calibration.formats)
+    @property
+    def warnings(self) -> list[str]:
+        """The notes that are warnings (``"warning: ..."``)."""
+        return [n for n in self.notes if n.startswith("warning:")]
+
+    @classmethod
+    def _from_parts(cls, parts, source) -> RigCalibration:
+        try:
+            return cls(parts.cameras, parts.ground, parts.metadata, parts.notes)
+        except CalibrationError as exc:
+            raise exc.in_file(source) from None
+
     @classmethod
     def _read(cls, fmt: str, *args) -> RigCalibration:
         from calibration import formats
+        from calibration.formats.checks import settle
 
-        cameras, ground, metadata = formats.reader(fmt)(*args)
+        parts = formats.reader(fmt)(*args)
         try:
-            return cls(cameras, ground, metadata)
+            parts = settle(parts, source=str(args[0]))
         except CalibrationError as exc:
             raise exc.in_file(args[0]) from None
+        return cls._from_parts(parts, args[0])
 
     @classmethod
     def load(cls, path: str | PathLike) -> RigCalibration:
@@ -185,15 +207,29 @@ class RigCalibration:
         return cls._read("qualisys", path)
 
     @classmethod
-    def load_any(cls, path: str | PathLike, fmt: str | None = None) -> RigCalibration:
-        """Read a calibration in any supported format (``fmt``, or chosen from the path and content)."""
+    def load_any(cls, path: str | PathLike, fmt: str | None = None, *, units: str | None = None,
+                 z_down: str | None = None) -> RigCalibration:
+        """Read a calibration in any supported format (``fmt``, or chosen from the path and content).
+
+        ``units`` (``"m"``, ``"cm"``, ``"mm"``) overrides the units detected from the
+        magnitudes; ``z_down`` says what to do with a world whose Z points down (``"flip"``,
+        the default for other tools' files; ``"refuse"``; ``"keep"``, the default for the
+        toolkit's own). ``notes`` of the result say what was read and assumed.
+        """
         from calibration import formats
 
-        cameras, ground, metadata = formats.read(path, fmt)
-        try:
-            return cls(cameras, ground, metadata)
-        except CalibrationError as exc:
-            raise exc.in_file(path) from None
+        return cls._from_parts(formats.read(path, fmt, units=units, z_down=z_down), path)
+
+    @classmethod
+    def from_camera_files(cls, pairs: dict, *, units: str | None = None,
+                          z_down: str | None = None) -> RigCalibration:
+        """Per-camera OpenCV FileStorage files ``{camera name: file}`` (e.g. ``config.xml`` with
+        ``CameraMatrix``, ``DistortionCoeffs``, ``Rotation``, ``Translation``), as :meth:`load_any`."""
+        from calibration import formats
+
+        if not pairs:
+            raise CalibrationError("expected at least one NAME=FILE pair", field="cameras")
+        return cls._from_parts(formats.read_pairs(pairs, units=units, z_down=z_down), next(iter(pairs.values())))
 
     def write(self, path: str | PathLike, fmt: str | None = None) -> Path:
         """Write in any writable format (``fmt``, or chosen from the path)."""

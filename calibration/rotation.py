@@ -23,6 +23,7 @@ __all__ = [
     "look_at",
     "matrix_to_quaternion",
     "matrix_to_rotvec",
+    "nearest_rotation",
     "quaternion_to_matrix",
     "rotation_angle",
     "rotvec_to_matrix",
@@ -87,6 +88,22 @@ def is_rotation(R, tol: float = 1e-6) -> bool:
     if m.shape != (3, 3) or not np.all(np.isfinite(m)):
         return False
     return bool(np.max(np.abs(m @ m.T - np.eye(3))) <= tol and np.linalg.det(m) > 0)
+
+
+def nearest_rotation(M) -> tuple[np.ndarray, float]:
+    """The rotation nearest ``M`` (3, 3) in the Frobenius norm (SVD: ``U diag(1, 1, det) Vᵀ``)
+    and how far ``M`` was from orthonormal (``max |M Mᵀ - I|``). Files written with few
+    decimals (6 in EasyMocap's ``extri.yml``) hold matrices off by ~1e-6.
+
+    >>> R, err = nearest_rotation(np.round(rotvec_to_matrix([0.3, -1.2, 0.5]), 6))
+    >>> bool(err > 1e-7) and is_rotation(R, 1e-12)
+    True
+    """
+    m = np.asarray(M, dtype=np.float64)
+    err = float(np.max(np.abs(m @ m.T - np.eye(3))))
+    U, _, Vt = np.linalg.svd(m)
+    D = np.diag([1.0, 1.0, np.sign(np.linalg.det(U @ Vt))])
+    return U @ D @ Vt, err
 
 
 def look_at(center, target, up=(0.0, 0.0, 1.0)) -> tuple[np.ndarray, np.ndarray]:

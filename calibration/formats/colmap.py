@@ -179,7 +179,10 @@ def read_colmap(path: str | PathLike):
                 raise CalibrationError(f"bad sidecar ({exc!r})", file=sidecar, field="ground") from None
             except CalibrationError as exc:
                 raise exc.in_file(sidecar) from None
-        return RigParts(cameras, ground, meta)
+        if sidecar.exists():
+            return RigParts(cameras, ground, meta, own_frame=True)
+        return RigParts(cameras, ground, meta, units="arbitrary",
+                        notes=(f"no {SIDECAR} beside the model: the floor is assumed to be z = 0",))
     except CalibrationError as exc:
         raise exc.in_file(path) from None
 

@@ -14,6 +14,7 @@ from pathlib import Path
 from calibration.camera import Camera
 from calibration.errors import CalibrationError
 from calibration.formats import RigParts
+from calibration.formats.text import read_document
 from rigs.atomic import atomic_write_text
 from calibration.ground import GroundPlane
 
@@ -78,25 +79,14 @@ def rig_from_dict(doc: dict, path: str | PathLike = "<dict>"):
             if not isinstance(g, dict) or "normal" not in g or "offset" not in g:
                 raise CalibrationError("expected {normal, offset}", field="ground")
             ground = GroundPlane(g["normal"], g["offset"])
-        return RigParts(cameras, ground, doc.get("metadata") or {})
+        return RigParts(cameras, ground, doc.get("metadata") or {}, units="m", units_fixed=True, own_frame=True)
     except CalibrationError as exc:
         raise exc.in_file(path) from None
 
 
 def read_native(path: str | PathLike):
     path = Path(path)
-    try:
-        text = path.read_text(encoding="utf-8")
-    except OSError as exc:
-        raise CalibrationError(f"cannot read ({exc.strerror})", file=path) from None
-    except UnicodeDecodeError as exc:
-        raise CalibrationError(f"not UTF-8 text (byte {exc.start}): expected a UTF-8 JSON file", file=path) from None
-    try:
-        doc = json.loads(text)
-    except (json.JSONDecodeError, RecursionError) as exc:
-        reason = "nested too deeply" if isinstance(exc, RecursionError) else str(exc)
-        raise CalibrationError(f"not valid JSON ({reason})", file=path) from None
-    return rig_from_dict(doc, path)
+    return rig_from_dict(read_document(path, json.loads, "JSON", (json.JSONDecodeError,)), path)
 
 
 def write_native(rig, path: str | PathLike) -> Path:

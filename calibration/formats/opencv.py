@@ -24,7 +24,12 @@ camera; when absent the camera is pinhole. A fisheye camera's ``dist_<cam>`` is 
 ``k1 k2 k3 k4`` (readers unaware of ``model_`` would take them for ``k1 k2 p1 p2``).
 ``D_<cam>`` is read when ``dist_<cam>`` is absent, as EasyMocap does.
 
-``Rot_`` is read when present (and must agree with ``R_``), else ``R_``. Files without
+``Rot_`` is read when present (and must agree with ``R_`` to ``ROUNDING_TOL``), else ``R_``.
+Files written with few decimals (EasyMocap's own writer keeps 6) hold a ``Rot_`` that is not
+orthonormal to the toolkit's 1e-6: within ``ROUNDING_TOL`` (1e-4) the rotation is taken from
+``R_`` (a Rodrigues vector is a rotation at any precision) or, without ``R_``, re-orthonormalised
+(SVD, :func:`calibration.rotation.nearest_rotation`), and a note says so; beyond it the file
+is refused. Files without
 ``H_``/``W_`` get the image size guessed from the principal point (``2 c + 1``), with a
 warning and the camera names listed in ``metadata["size_guessed"]``.
 """
@@ -38,7 +43,7 @@ from pathlib import Path
 import numpy as np
 
 from calibration.camera import Camera
-from calibration.rotation import rotvec_to_matrix
+from calibration.rotation import nearest_rotation, rotvec_to_matrix
 from calibration.errors import CalibrationError
 from calibration.formats import RigParts
 from rigs.atomic import atomic_path
@@ -46,7 +51,11 @@ from calibration.ground import GroundPlane
 
 log = logging.getLogger(__name__)
 
-ROT_AGREE_TOL = 1e-6
+#: Largest difference between ``Rot_`` and ``R_``, and largest ``max |R Rᵀ - I|`` of ``Rot_``,
+#: put down to rounding (6 decimals give ~1e-6); beyond it the file is refused.
+ROUNDING_TOL = 1e-4
+#: Orthonormality the toolkit requires of a rotation read as is (``Camera.ORTHONORMAL_TOL``).
+EXACT_TOL = 1e-6
 
 
 def _paths(intri_path, extri_path) -> tuple[Path, Path]:
@@ -113,6 +122,11 @@ def _open(path: Path):
 def _names(fs, path: Path) -> list[str]:
     node = fs.getNode("names")
     if node.empty() or node.isNone():
+        single = next((k for k in ("camera_matrix", "CameraMatrix") if not fs.getNode(k).empty()), None)
+        if single:
+            raise CalibrationError(f"missing: this is a single-camera OpenCV file ({single}), not EasyMocap's "
+                                   "intri.yml: read it as format opencv_camera (load_any detects it)",
+                                   file=path, field="names")
         raise CalibrationError("missing", file=path, field="names")
     names = []
     for i in range(node.size()):
@@ -191,7 +205,7 @@ def read_opencv(intri_path, extri_path=None):
                 "listed in intri but not in extri", file=extri_p, camera=missing[0], field="names"
             )
         cameras = {}
-        guessed = []
+        guessed, rounded = [], []
         for name in names:
             K = _mat(fi, f"K_{name}", intri_p, name)
             dist = _mat(fi, f"dist_{name}", intri_p, name, required=False)
@@ -224,15 +238,9 @@ def read_opencv(intri_path, extri_path=None):
                     f"expected a 3x1 Rodrigues vector, got shape {rvec.shape}",
                     file=extri_p, camera=name, field=f"R_{name}",
                 )
-            if Rot is None:
-                Rot = rotvec_to_matrix(rvec.reshape(3))
-            elif rvec is not None and Rot.shape == (3, 3) and np.all(np.isfinite(rvec)):
-                gap = np.max(np.abs(rotvec_to_matrix(rvec.reshape(3)) - Rot))
-                if gap > ROT_AGREE_TOL:
-                    raise CalibrationError(
-                        f"disagrees with R_{name} (max difference {gap:.3g})",
-                        file=extri_p, camera=name, field=f"Rot_{name}",
-                    )
+            Rot, note = _rotation(Rot, rvec, extri_p, name)
+            if note:
+                rounded.append(name)
             T = _mat(fe, f"T_{name}", extri_p, name)
             try:
                 cameras[name] = Camera(name, K, dist, Rot, T, size, model)
@@ -257,17 +265,47 @@ def read_opencv(intri_path, extri_path=None):
                 meta = json.loads(node.string())
             except json.JSONDecodeError as exc:
                 raise CalibrationError(f"not JSON ({exc})", file=extri_p, field="studio_metadata") from None
+        notes = ["units: EasyMocap's documentation asks for metres"]
+        if rounded:
+            notes.append(f"rotations of {', '.join(rounded)} written with few decimals (not orthonormal to "
+                         f"{EXACT_TOL:g}, within {ROUNDING_TOL:g}): taken from R_ (Rodrigues) or the nearest rotation (SVD)")
         if guessed:
+            notes.append(f"warning: no H_/W_ image size for {', '.join(guessed)}: guessed from the principal point "
+                         "(2 c + 1)")
             log.warning(
                 "%s: no H_/W_ image size for %s; guessed from the principal point",
                 intri_p,
                 ", ".join(guessed),
             )
             meta["size_guessed"] = guessed
-        return RigParts(cameras, ground, meta)
+        own = not fe.getNode("ground_normal").empty()
+        return RigParts(cameras, ground, meta, units="m", units_fixed=False, own_frame=own, notes=tuple(notes))
     finally:
         fi.release()
         fe.release()
+
+
+def _rotation(Rot, rvec, path: Path, name: str) -> tuple[np.ndarray, bool]:
+    """The camera's rotation from ``Rot_`` (3x3) and/or ``R_`` (Rodrigues); True when rounding
+    had to be undone (see the module docstring)."""
+    if Rot is None:
+        return rotvec_to_matrix(rvec.reshape(3)), False
+    if Rot.shape != (3, 3) or not np.all(np.isfinite(Rot)):
+        return Rot, False  # Camera names the shape or the NaN
+    from_rvec = None
+    if rvec is not None and np.all(np.isfinite(rvec)):
+        from_rvec = rotvec_to_matrix(rvec.reshape(3))
+        gap = float(np.max(np.abs(from_rvec - Rot)))
+        if gap > ROUNDING_TOL:
+            raise CalibrationError(f"disagrees with R_{name} (max difference {gap:.3g} > {ROUNDING_TOL:g})",
+                                   file=path, camera=name, field=f"Rot_{name}")
+    nearest, err = nearest_rotation(Rot)
+    if err <= EXACT_TOL or np.linalg.det(Rot) < 0:
+        return Rot, False  # exact enough, or a reflection Camera refuses by name
+    if err > ROUNDING_TOL:
+        raise CalibrationError(f"not a rotation: max |R Rᵀ - I| = {err:.3g}, more than rounding to few decimals "
+                               f"explains ({ROUNDING_TOL:g})", file=path, camera=name, field=f"Rot_{name}")
+    return (nearest if from_rvec is None else from_rvec), True
 
 
 def _write_names(fs, names):

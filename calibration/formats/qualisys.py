@@ -17,7 +17,6 @@ Per ``<camera serial=...>``:
 
 from __future__ import annotations
 
-import xml.etree.ElementTree as ET
 from os import PathLike
 from pathlib import Path
 
@@ -26,29 +25,10 @@ import numpy as np
 from calibration.camera import Camera
 from calibration.errors import CalibrationError
 from calibration.formats import RigParts
+from calibration.formats.text import attr_float as _float, child as _child, parse_xml
 from calibration.ground import GroundPlane
 
 FLIP = np.diag([1.0, -1.0, -1.0])
-
-
-def _float(elem, attr: str, cam: str, field: str) -> float:
-    value = elem.get(attr)
-    if value is None:
-        raise CalibrationError("missing", camera=cam, field=f"{field}.{attr}")
-    try:
-        number = float(value)
-    except ValueError:
-        raise CalibrationError(f"not a number: {value!r}", camera=cam, field=f"{field}.{attr}") from None
-    if not np.isfinite(number):
-        raise CalibrationError(f"expected a finite number, got {value!r}", camera=cam, field=f"{field}.{attr}")
-    return number
-
-
-def _child(elem, tag: str, cam: str):
-    child = elem.find(tag)
-    if child is None:
-        raise CalibrationError("missing", camera=cam, field=tag)
-    return child
 
 
 def _camera(elem) -> Camera:
@@ -87,12 +67,7 @@ def _camera(elem) -> Camera:
 
 def read_qualisys(path: str | PathLike):
     path = Path(path)
-    try:
-        root = ET.parse(path).getroot()
-    except OSError as exc:
-        raise CalibrationError(f"cannot read ({exc.strerror})", file=path) from None
-    except ET.ParseError as exc:
-        raise CalibrationError(f"not valid Qualisys XML ({exc})", file=path) from None
+    root = parse_xml(path, "Qualisys XML")
     try:
         cameras = {}
         residuals = {}
@@ -113,4 +88,5 @@ def read_qualisys(path: str | PathLike):
     except CalibrationError as exc:
         raise exc.in_file(path) from None
     meta = {"source": "qualisys", "avg_residual": residuals}
-    return RigParts(cameras, GroundPlane.floor(), meta)
+    return RigParts(cameras, GroundPlane.floor(), meta, units="m", units_fixed=True,
+                    notes=("Qualisys camera centres are in mm by the format: converted to metres on reading",))

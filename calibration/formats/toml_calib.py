@@ -8,7 +8,8 @@ Per camera::
     matrix = [ [fx, 0, cx], [0, fy, cy], [0, 0, 1] ]
     distortions = [ k1, k2, p1, p2 ]      # OpenCV order, any OpenCV length
     rotation = [ rx, ry, rz ]             # Rodrigues, world -> camera
-    translation = [ tx, ty, tz ]          # metres, X_c = R X_w + t
+    translation = [ tx, ty, tz ]          # X_c = R X_w + t; Pose2Sim: metres, anipose: the
+                                          # board's unit (often mm), FreeMoCap: mm
     fisheye = false
 
 ``fisheye = true`` (anipose / Pose2Sim) marks a ``cv2.fisheye`` camera: ``distortions`` is
@@ -76,6 +77,15 @@ def _size(item: dict, name: str) -> tuple:
     return tuple(size)
 
 
+def _units(meta: dict) -> tuple[str, tuple[str, ...]]:
+    """The usual unit of the file's translations: FreeMoCap (``[metadata] charuco_square_size``,
+    entered in millimetres in its GUI) → mm; Pose2Sim → m. anipose writes the board's unit,
+    which the file does not say: magnitudes decide (:mod:`calibration.formats.checks`)."""
+    if "charuco_square_size" in meta:
+        return "mm", (f"FreeMoCap file (charuco_square_size = {meta['charuco_square_size']!r}, entered in mm)",)
+    return "m", ("Pose2Sim writes metres; anipose writes the board's unit (not stated in the file)",)
+
+
 def read_toml(path: str | PathLike):
     path = Path(path)
     try:
@@ -101,29 +111,35 @@ def read_toml(path: str | PathLike):
         if not cameras:
             raise CalibrationError("no camera tables", field="cameras")
         g = meta.pop(GROUND_KEY, None)
+        units, notes = _units(meta)
         if g is None:
             ground = GroundPlane.floor()
         elif not isinstance(g, dict) or "normal" not in g or "offset" not in g:
             raise CalibrationError("expected {normal, offset}", field=f"metadata.{GROUND_KEY}")
         else:
             ground = GroundPlane(g["normal"], g["offset"])
-        return RigParts(cameras, ground, meta)
+        return RigParts(cameras, ground, meta, units=units, units_fixed=False, own_frame=g is not None,
+                        notes=notes)
     except CalibrationError as exc:
         raise exc.in_file(path) from None
 
 
+def camera_table(name: str, cam) -> dict:
+    """A camera as the anipose-style table (also Caliscope's): name, size, matrix,
+    distortions, rotation (Rodrigues), translation, fisheye."""
+    return {
+        "name": name,
+        "size": [int(cam.width), int(cam.height)],
+        "matrix": cam.K.tolist(),
+        "distortions": cam.dist.tolist(),
+        "rotation": cam.rvec.tolist(),
+        "translation": cam.t.tolist(),
+        "fisheye": cam.model == "fisheye",
+    }
+
+
 def rig_to_toml_doc(rig) -> dict:
-    doc: dict = {}
-    for name, cam in rig.cameras.items():
-        doc[name] = {
-            "name": name,
-            "size": [int(cam.width), int(cam.height)],
-            "matrix": cam.K.tolist(),
-            "distortions": cam.dist.tolist(),
-            "rotation": cam.rvec.tolist(),
-            "translation": cam.t.tolist(),
-            "fisheye": cam.model == "fisheye",
-        }
+    doc: dict = {name: camera_table(name, cam) for name, cam in rig.cameras.items()}
     meta = {"adjusted": False, "error": 0.0}
     meta.update(rig.metadata)
     meta[GROUND_KEY] = rig.ground.to_dict()

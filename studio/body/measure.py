@@ -1,20 +1,21 @@
 """Anthropometric measurements of a body of the model (thesis §6.4.4).
 
 All in metres / kilograms, on the body in its canonical standing pose (the default pose,
-standing on z = 0). Circumferences are horizontal slices of the trunk and the perimeter of
-the slice's convex hull (a tape measure bridges concavities, thesis §6.4.4):
+standing on z = 0). Every measurement that ISO 7250-1 defines comes from
+:mod:`studio.body.iso7250` (the one definition of each, with its clause and landmarks):
+``stature``, ``arm_span``, ``chest_circumference``, ``waist_circumference``,
+``hip_circumference``, ``mass`` and ``inseam`` (= ISO crotch height) under these names, and
+all of :data:`~studio.body.iso7250.ISO_NAMES` besides. Kept here, for the shape prior's
+stored samples (:mod:`studio.body.inverse`), are the model's own:
 
-- ``stature``: top of the head above the floor;
-- ``arm_span``: fingertip to fingertip in a T-pose (arms rotated horizontal, elbows straight);
 - ``shoulder_breadth``: widest horizontal extent of torso + upper arms at shoulder level
   (bideltoid-like);
-- ``chest_circumference``: maximum torso slice between 6 and 22 cm below the shoulder joints;
-- ``waist_circumference``: minimum trunk slice between the hips and the chest;
-- ``hip_circumference``: maximum slice of pelvis + thighs around the hip joints (buttocks);
-- ``inseam``: crotch height above the floor;
 - ``arm_length``: shoulder joint → elbow → wrist joint (mean of both arms);
-- ``volume`` (closed mesh, divergence theorem) and ``mass`` = volume × density
+- ``volume`` (closed mesh, divergence theorem); ``mass`` = volume × density
   (980 kg/m³ by default, the value Anny's anthropometry uses).
+
+Circumferences are perimeters of the convex hull of a plane section (a tape measure bridges
+concavities, thesis §6.4.4).
 
 :func:`measure_mesh` holds the definitions (on given meshes and joints); :func:`measure`
 applies them to a body of the model, :func:`measure_anny_body` to a true (simulated) Anny
@@ -97,16 +98,6 @@ def slice_circumference(vertices: np.ndarray, faces: np.ndarray, z: float) -> fl
     return convex_perimeter(slice_points(vertices, faces, z))
 
 
-def _scan(vertices, faces, z0, z1, step=0.005):
-    zs = np.arange(z0, z1 + 1e-9, step)
-    e = _edges(faces)
-    # only edges spanning the scanned band matter
-    lo = np.minimum(vertices[e[:, 0], 2], vertices[e[:, 1], 2])
-    hi = np.maximum(vertices[e[:, 0], 2], vertices[e[:, 1], 2])
-    e = e[(hi >= z0) & (lo <= z1)]
-    return zs, np.array([convex_perimeter(slice_points(vertices, faces, z, e)) for z in zs])
-
-
 def t_pose(model, shape) -> np.ndarray:
     """Pose with the upper arms horizontal (±x) and the elbows straight."""
     
@@ -169,39 +160,26 @@ def measure_mesh(
         raise ValueError(f"faces index vertices {f.min()}..{f.max()}, the mesh has {len(v)}")
     if not np.isfinite(density) or density <= 0:
         raise ValueError(f"density must be a positive number of kg/m³, got {density}")
-    out: dict[str, float] = {}
-    out["stature"] = float(v[:, 2].max() - v[:, 2].min())
-    out["arm_span"] = float(vt[:, 0].max() - vt[:, 0].min())
+    from studio.body.iso7250 import measure_iso
 
+    iso = measure_iso(v, vt, J, f, parts, fp, density=density).values
+    out: dict[str, float] = {}
+    out["stature"] = iso["stature"]
+    out["arm_span"] = iso["arm_span"]
     sh_z = 0.5 * (J[_P["upperarm_l"], 2] + J[_P["upperarm_r"], 2])
-    hip_z = 0.5 * (J[_P["upperleg_l"], 2] + J[_P["upperleg_r"], 2])
     sel = np.isin(parts, [_P["torso"], _P["upperarm_l"], _P["upperarm_r"]]) & (v[:, 2] > sh_z - 0.03)
     out["shoulder_breadth"] = float(v[sel, 0].max() - v[sel, 0].min()) if np.any(sel) else 0.0
-
-    torso_f = f[fp == _P["torso"]]
-    trunk_f = f[np.isin(fp, [_P["torso"], _P["pelvis"]])]
-    hips_f = f[np.isin(fp, [_P["pelvis"], _P["upperleg_l"], _P["upperleg_r"]])]
-    zs, c = _scan(v, torso_f, sh_z - 0.22, sh_z - 0.06)
-    out["chest_circumference"] = float(c.max())
-    chest_z = float(zs[np.argmax(c)])
-    zs, c = _scan(v, trunk_f, hip_z + 0.06, chest_z - 0.05)
-    c = np.where(c > 0, c, np.inf)
-    out["waist_circumference"] = float(c.min())
-    zs, c = _scan(v, hips_f, hip_z - 0.15, hip_z + 0.05)
-    out["hip_circumference"] = float(c.max())
-
-    knee_z = 0.5 * (J[_P["lowerleg_l"], 2] + J[_P["lowerleg_r"], 2])
-    mid = (np.abs(v[:, 0]) < 0.015) & (v[:, 2] > knee_z) & (v[:, 2] < sh_z)
-    mid &= np.isin(parts, [_P["pelvis"], _P["upperleg_l"], _P["upperleg_r"]])
-    out["inseam"] = float(v[mid, 2].min() - v[:, 2].min()) if np.any(mid) else float("nan")
-
+    for name in ("chest_circumference", "waist_circumference", "hip_circumference"):
+        out[name] = iso[name]
+    out["inseam"] = iso["crotch_height"]
     lengths = []
     for side in ("l", "r"):
         s, e, w = J[_P[f"upperarm_{side}"]], J[_P[f"lowerarm_{side}"]], J[_P[f"hand_{side}"]]
         lengths.append(np.linalg.norm(e - s) + np.linalg.norm(w - e))
     out["arm_length"] = float(np.mean(lengths))
     out["volume"] = float(mesh_volume(v, f))
-    out["mass"] = out["volume"] * density
+    out["mass"] = iso["mass"]
+    out.update({k: val for k, val in iso.items() if k not in out})
     return out
 
 

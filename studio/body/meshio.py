@@ -1,14 +1,17 @@
-"""Mesh export: binary PLY and Wavefront OBJ, written atomically."""
+"""Mesh export: binary PLY, Wavefront OBJ and binary glTF 2.0 (.glb), written atomically."""
 
 from __future__ import annotations
 
 from pathlib import Path
 
+import json
+import struct
+
 import numpy as np
 
 from rigs.atomic import atomic_open
 
-__all__ = ["write_mesh", "read_ply"]
+__all__ = ["glb_bytes", "write_mesh", "read_ply"]
 
 
 def _check(vertices: np.ndarray, faces: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -22,14 +25,18 @@ def _check(vertices: np.ndarray, faces: np.ndarray) -> tuple[np.ndarray, np.ndar
 
 
 def write_mesh(path: str | Path, vertices: np.ndarray, faces: np.ndarray, colors: np.ndarray | None = None) -> Path:
-    """Write ``path`` (.ply binary little-endian or .obj); optional per-vertex RGB uint8 colors."""
+    """Write ``path`` (.ply binary little-endian, .obj or .glb); optional per-vertex RGB uint8
+    colors (PLY only). Coordinates as given (metres, Z up; glTF readers expecting Y up see the
+    body lying on its back — the world frame is kept so that every export agrees)."""
     path = Path(path)
     v, f = _check(vertices, faces)
     suffix = path.suffix.lower()
-    if suffix not in (".ply", ".obj"):
-        raise ValueError(f"{path}: mesh format must be .ply or .obj")
+    if suffix not in (".ply", ".obj", ".glb"):
+        raise ValueError(f"{path}: mesh format must be .ply, .obj or .glb")
     with atomic_open(path, "wb") as fh:
-        if suffix == ".ply":
+        if suffix == ".glb":
+            fh.write(glb_bytes(v, f))
+        elif suffix == ".ply":
             header = ["ply", "format binary_little_endian 1.0", f"element vertex {len(v)}",
                       "property float x", "property float y", "property float z"]
             if colors is not None:
@@ -51,6 +58,34 @@ def write_mesh(path: str | Path, vertices: np.ndarray, faces: np.ndarray, colors
             lines += [f"f {a + 1} {b + 1} {c + 1}" for a, b, c in f]
             fh.write(("\n".join(lines) + "\n").encode())
     return path
+
+
+def _pad(data: bytes, fill: bytes) -> bytes:
+    return data + fill * (-len(data) % 4)
+
+
+def glb_bytes(vertices: np.ndarray, faces: np.ndarray) -> bytes:
+    """A binary glTF 2.0 file of one triangle mesh: POSITION (float32, with min/max) and
+    uint32 indices in one buffer, one node, one scene."""
+    v = np.ascontiguousarray(vertices, dtype="<f4")
+    idx = np.ascontiguousarray(faces, dtype="<u4").ravel()
+    pos, ind = v.tobytes(), _pad(idx.tobytes(), b"\0")
+    gltf = {
+        "asset": {"version": "2.0", "generator": "Silhouette & Shadow Studio"},
+        "scene": 0, "scenes": [{"nodes": [0]}], "nodes": [{"mesh": 0, "name": "body"}],
+        "meshes": [{"primitives": [{"attributes": {"POSITION": 0}, "indices": 1, "mode": 4}]}],
+        "buffers": [{"byteLength": len(pos) + len(ind)}],
+        "bufferViews": [{"buffer": 0, "byteOffset": 0, "byteLength": len(pos), "target": 34962},
+                        {"buffer": 0, "byteOffset": len(pos), "byteLength": idx.nbytes, "target": 34963}],
+        "accessors": [{"bufferView": 0, "componentType": 5126, "count": len(v), "type": "VEC3",
+                       "min": v.min(axis=0).tolist(), "max": v.max(axis=0).tolist()},
+                      {"bufferView": 1, "componentType": 5125, "count": int(idx.size), "type": "SCALAR"}],
+    }
+    js = _pad(json.dumps(gltf, separators=(",", ":")).encode(), b" ")
+    binary = pos + ind
+    total = 12 + 8 + len(js) + 8 + len(binary)
+    return (struct.pack("<4sII", b"glTF", 2, total) + struct.pack("<I4s", len(js), b"JSON") + js
+            + struct.pack("<I4s", len(binary), b"BIN\0") + binary)
 
 
 def read_ply(path: str | Path) -> tuple[np.ndarray, np.ndarray]:

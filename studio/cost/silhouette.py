@@ -102,9 +102,11 @@ class SilhouetteTarget:
     names : tuple[str, ...]
         View (camera) names, in the order model masks must be given.
     masks : tuple[(H_l, W_l) bool, ...]
-        Observed silhouettes ``F^o_k`` at this level.
+        Observed silhouettes ``F^o_k`` at this level that the model must explain (the
+        observed-to-model direction): the silhouettes less any ``ignore`` region.
     distance_maps : tuple[(H_l, W_l) float32, ...]
-        ``C^τ(F^o_k)`` in level pixels (0 inside, capped at ``tau_level``).
+        ``C^τ(F^o_k)`` of the whole observed silhouettes, ignored regions included, in level
+        pixels (0 inside, capped at ``tau_level``): the model may cover them freely.
     summed_areas : tuple[(H_l + 1, W_l + 1) int64, ...]
         Summed-area tables of the observed masks.
     counts : tuple[int, ...]
@@ -142,6 +144,7 @@ class SilhouetteTarget:
         level: int = 0,
         names: Sequence[str] | None = None,
         mask_size="precise",
+        ignore: Sequence[np.ndarray | None] | None = None,
     ) -> SilhouetteTarget:
         """Precompute the observed side of eq. 4.5 for every view.
 
@@ -160,6 +163,11 @@ class SilhouetteTarget:
             View names (default ``"view0"``, ``"view1"``, ...).
         mask_size : {3, 5, "precise"}
             OpenCV distance mask.
+        ignore : sequence of (H, W) bool or None, optional
+            Per view, observed pixels the model need not explain — e.g. a stool under a
+            seated person (:func:`studio.fit.props.support_masks`): left out of the
+            observed-to-model direction, still inside the silhouette for the model-to-observed
+            one (the model may cover them; a prop can hide the body).
         """
         tau = _check_tau(tau)
         xi = _check_xi(xi)
@@ -183,11 +191,17 @@ class SilhouetteTarget:
         full = as_mask(masks[0], f"observed mask of view {names[0]!r}")
         full_size = full.shape
         tau_level = tau / (1 << level)
+        ignore = [None] * len(masks) if ignore is None else list(ignore)
+        if len(ignore) != len(masks):
+            raise ValueError(f"ignore: got {len(ignore)} masks for {len(masks)} observed views")
         level_masks, dmaps, tables, counts = [], [], [], []
-        for name, mask in zip(names, masks, strict=True):
+        for name, mask, skip in zip(names, masks, ignore, strict=True):
             mask = as_mask(mask, f"observed mask of view {name!r}", shape=full_size)
             mask = downsample_mask(mask, level) if level else mask.copy()
             dist = _distance_to(mask, tau_level, flag)
+            if skip is not None:
+                skip = as_mask(skip, f"ignore mask of view {name!r}", shape=full_size)
+                mask &= ~(downsample_mask(skip, level) if level else skip)
             table = _summed_area(mask)
             for arr in (mask, dist, table):
                 arr.flags.writeable = False

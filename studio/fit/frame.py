@@ -49,6 +49,7 @@ from studio.body.inverse import shape_from_measurements
 from studio.fit.init import hull_centroid, hull_height, initial_poses
 from studio.fit.library import library_match, stand_on_floor
 from studio.fit.objective import CylinderObjective, FrameObjective, pose_bounds
+from studio.fit.props import find_support
 from studio.fit.quality import fit_quality, refused_quality, screen_masks
 from studio.optimize import Stage, annealed_particle_filter, staged_nelder_mead, thesis_stages
 
@@ -87,6 +88,10 @@ class FitOptions:
     9.5 to 17.7 mm and runs from 10.2 to 13.1 mm median surface distance (a stride facing away
     is the library's blind spot). Kept on: a six-posture dev set without strides had shown no
     loss; the strides do.
+    ``find_support``: look for a prop under a seated body after the middle-level Nelder–Mead
+    (:mod:`studio.fit.props`); when one is found, the observed pixels under the seat are left
+    out of the observed-to-model term and the Nelder–Mead stages run again (own-model seated
+    body on a stool: surface distance 15.6 mm when the stool is fitted as body).
     ``start``: how a frame fitted from its silhouettes starts — ``"library"`` (the lab posture
     library matched to the silhouettes, :mod:`studio.fit.library`) or ``"stride"`` (12 headings
     × standing / stride postures, :func:`studio.fit.init.initial_poses`).
@@ -117,6 +122,7 @@ class FitOptions:
     prior_weight: float = 1.0
     search_model: str = "cylinder"
     start: str = "library"
+    find_support: bool = True
 
     def __post_init__(self):
         if self.search_model not in ("scape", "cylinder"):
@@ -245,8 +251,10 @@ def _pose_sigma(scale: float) -> np.ndarray:
     return s * scale
 
 
-def build_targets(masks, names, options: FitOptions) -> dict:
-    return {lvl: SilhouetteTarget.build(masks, tau=options.tau, xi=options.xi, level=lvl, names=names)
+def build_targets(masks, names, options: FitOptions, ignore=None) -> dict:
+    """{level: SilhouetteTarget} of the observed ``masks`` at the levels of ``options``
+    (``ignore``: per view, observed pixels the body need not explain, e.g. a stool)."""
+    return {lvl: SilhouetteTarget.build(masks, tau=options.tau, xi=options.xi, level=lvl, names=names, ignore=ignore)
             for lvl in sorted(set(options.levels))}
 
 
@@ -382,6 +390,14 @@ def fit_frame(
             x_pose, c_pose, apf_cost = x_r, rival_cost, apf_r
     timings["particle_filter"] = time.perf_counter() - t
 
+    support = None
+    if options.find_support:
+        # a seated body rests on something the silhouettes hold too (a stool): what is observed
+        # under its seat becomes a don't-care region of the cost from here on
+        support = find_support(model, cameras, masks, base_shape, model.clip_pose(x_pose))
+        if support is not None:
+            targets = build_targets(masks, [c.name for c in cameras], options, ignore=support.ignore)
+
     # -- staged Nelder–Mead on pose + shape
     t = time.perf_counter()
     obj = FrameObjective(model, cameras, targets, base_shape, n_free, options.prior_weight)
@@ -417,7 +433,10 @@ def fit_frame(
     shape_out, pose_out = shapes[0], model.clip_pose(poses[0])
     costs = obj.terms(obj.pack(shape_out, pose_out), final)
     t = time.perf_counter()
-    quality = fit_quality(model, cameras, masks, shape_out, pose_out, costs, screen)
+    body_masks = masks if support is None else [m & ~i for m, i in zip(masks, support.ignore, strict=True)]
+    quality = fit_quality(model, cameras, body_masks, shape_out, pose_out, costs, screen)
+    if support is not None:
+        quality["support"] = support.to_json([c.name for c in cameras])
     timings["quality"] = time.perf_counter() - t
     costs["particle_filter_best"] = apf_cost
     costs["search"] = c_pose

@@ -18,10 +18,12 @@ from studio.render.raster import (
 )
 from studio.render.shade import lambert, shade_raster, vertex_normals
 from studio.render.shadow import shadow_mask, shadow_vertices
+from studio.render.solids import cylinder_mesh
 from studio.render.spans import silhouettes_contour, silhouettes_fast
 
 __all__ = [
     "DirectionalLight",
+    "cylinder_mesh",
     "MAX_SMALL_BBOX",
     "PointLight",
     "Raster",

@@ -1,4 +1,4 @@
-"""``report/index.html`` of a fitted session: self-contained (images as base64 PNG)."""
+"""``report/index.html`` of a fitted session: self-contained (images as base64 PNG), printable."""
 
 from __future__ import annotations
 
@@ -10,64 +10,27 @@ from pathlib import Path
 
 import numpy as np
 
-from studio.fit.errors import FitError
-
-__all__ = ["write_report"]
+__all__ = ["page_html", "write_report"]
 
 log = logging.getLogger(__name__)
 
+_STATUS_STYLE = {"ok": "#1a7f37", "suspect": "#b35900", "failed": "#c0000f", "unchecked": "#777"}
+
+_CSS = """body{font-family:sans-serif;max-width:1200px;margin:auto;padding:1em;color:#222}
+table{border-collapse:collapse;margin:.5em 0}td,th{border:1px solid #ccc;padding:3px 7px;text-align:right;font-size:13px}
+th{background:#f3f3f3}td.l,th.l{text-align:left}img{margin:2px;max-width:100%}
+.sw{display:inline-block;width:1em;height:1em;margin:0 4px 0 12px;vertical-align:middle;border:1px solid #888}
+.row{display:flex;flex-wrap:wrap}.meta td{text-align:left}.no{color:#c0000f;font-weight:bold}.yes{color:#1a7f37}
+header{border-bottom:2px solid #333;margin-bottom:1em}footer{color:#666;font-size:12px;border-top:1px solid #ccc;margin-top:2em}
+@media print{body{max-width:none;padding:0;font-size:11px}h2{page-break-before:always}h2.first{page-break-before:avoid}
+img{page-break-inside:avoid;max-width:100%}table{page-break-inside:auto}tr{page-break-inside:avoid}
+.noprint{display:none}}
+@page{size:A4;margin:12mm}"""
 
 
 def _esc(value) -> str:
     """Text for HTML content or a quoted attribute: every name and number a report embeds goes through here."""
     return html.escape(str(value), quote=True)
-
-
-def _cost_figure(fits: dict) -> str:
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    from studio.report.views import figure_base64
-
-    frames = sorted(fits)
-    fig, ax = plt.subplots(figsize=(6.5, 3))
-    tot = [fits[f].costs["total"] for f in frames]
-    ax.plot(frames, tot, "o-", color="k", label="total")
-    views = sorted(fits[frames[0]].costs.get("silhouette_per_view", {}))
-    for v in views:
-        ax.plot(frames, [fits[f].costs["silhouette_per_view"][v] for f in frames], ".--", label=v)
-    ax.set_xlabel("frame")
-    ax.set_ylabel("cost (eq. 4.6, full-res px)")
-    ax.grid(alpha=0.3)
-    ax.legend(fontsize=7, ncol=3)
-    return figure_base64(fig)
-
-
-def _measurement_figure(table: dict) -> str:
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    from studio.report.views import figure_base64
-
-    names = [n for n in table if table[n]["unit"] == "mm"]
-    fig, ax = plt.subplots(figsize=(6.5, 3))
-    for i, n in enumerate(names):
-        vals = np.array(list(table[n]["per_frame"].values()))
-        ax.plot(np.full(len(vals), i), vals - table[n]["mean"], "o", color="C0", alpha=0.6)
-        if table[n]["truth"] is not None:
-            ax.plot(i, table[n]["truth"] - table[n]["mean"], "x", color="C3", ms=9)
-    ax.axhline(0, color="k", lw=0.6)
-    ax.set_xticks(range(len(names)), [n.replace("_", " ") for n in names], rotation=35, ha="right", fontsize=8)
-    ax.set_ylabel("per-frame value − mean (mm)\n× = truth")
-    ax.grid(alpha=0.3)
-    return figure_base64(fig)
-
-
-_STATUS_STYLE = {"ok": "#1a7f37", "suspect": "#b35900", "failed": "#c0000f", "unchecked": "#777"}
 
 
 def _status_html(status: str, reasons=()) -> str:
@@ -84,129 +47,160 @@ def _reason_texts(quality: dict) -> list[str]:
 
 def _quality_html(qualities: dict) -> str:
     """One row per frame (fitted or refused): status, precision / recall, reasons."""
-    rows = ["<tr><th>frame</th><th>status</th><th>precision</th><th>recall</th><th>reasons</th></tr>"]
+    rows = ["<tr><th>frame</th><th>status</th><th>silhouette precision</th><th>silhouette recall</th>"
+            "<th class=l>reasons</th></tr>"]
     for f in sorted(qualities):
         q = qualities[f]
         pr = "".join(f"<td>{q[k]:.3f}</td>" if isinstance(q.get(k), (int, float)) else "<td>–</td>"
                      for k in ("silhouette_precision", "silhouette_recall"))
         rows.append(f"<tr><td>{_esc(f)}</td><td>{_status_html(q.get('status', 'unchecked'))}</td>{pr}"
-                    f"<td style='text-align:left'>{_esc('; '.join(_reason_texts(q)) or '–')}</td></tr>")
+                    f"<td class=l>{_esc('; '.join(_reason_texts(q)) or '–')}</td></tr>")
     return "<table>" + "".join(rows) + "</table>"
 
 
+def _fmt(v, digits=1, sign=""):
+    return "–" if v is None else f"{v:{sign}.{digits}f}"
+
+
 def _table_html(table: dict) -> str:
+    """The measurement table: value ± σ, 95 % interval, ISO 20685-1, ANSUR II, quality, truth."""
     has_truth = any(r["truth"] is not None for r in table.values())
-    has_anny = any(r.get("truth_anny") is not None and r.get("truth_source") == "studio" for r in table.values())
-    head = "<tr><th>measurement</th><th>mean ± std over frames</th><th>quality</th>"
+    head = ("<tr><th class=l>measurement</th><th class=l>definition</th><th>value</th><th>± σ</th><th>95 % interval</th>"
+            "<th>σ frames / calibration / fit</th><th>ISO 20685-1 limit</th><th>meets it</th>"
+            "<th>ANSUR II percentile (z)</th><th class=l>quality</th>")
     head += "<th>truth</th><th>error</th>" if has_truth else ""
-    head += "<th>truth (Anny's definition)</th><th>error</th>" if has_anny else ""
     rows = [head + "</tr>"]
-
-    def pair(value, error, u):
-        return "<td>–</td><td>–</td>" if value is None else f"<td>{value:.1f} {u}</td><td>{error:+.1f} {u}</td>"
-
     for name, r in table.items():
         u = _esc(r["unit"])
         st = r.get("status", "ok")
-        value = f"{r['mean']:.1f} ± {r['std']:.1f} {u}"
+        d = 2 if r["unit"] == "kg/m²" else 1
+        value = f"{r['mean']:.{d}f} {u}"
         if st != "ok":  # a flagged figure never looks like a clean one
             value = f"<s>{value}</s> <b style='color:{_STATUS_STYLE[st]}'>({_esc(st)})</b>"
-        row = (f"<tr><td>{_esc(name.replace('_', ' '))}</td><td>{value}</td>"
-               f"<td style='text-align:left'>{_status_html(st, r.get('flags', []))}</td>")
+        ci = r.get("ci95") or [None, None]
+        comps = " / ".join(_fmt(r.get(k)) for k in ("sigma_frames", "sigma_calibration", "sigma_posterior"))
+        ok = r.get("iso20685_ok")
+        meets = "–" if ok is None else ("<span class=yes>yes</span>" if ok else "<span class=no>no</span>")
+        pop = r.get("population")
+        pop_txt = "–" if pop is None else f"{_esc(pop['text'])} ({pop['z']:+.1f}, {_esc(pop['sex'])})"
+        row = (f"<tr><td class=l title='{_esc(r.get('clause', ''))}'><b>{_esc(r.get('title', name))}</b><br>"
+               f"<small>{_esc(r.get('clause', ''))}</small></td><td class=l><small>{_esc(r.get('definition', ''))}"
+               f"</small></td><td>{value}</td><td>{_fmt(r.get('sigma'), d)}</td>"
+               f"<td>{_fmt(ci[0], d)} – {_fmt(ci[1], d)}</td><td>{comps}</td>"
+               f"<td>{_fmt(r.get('iso20685_max_error'), 0)}</td><td>{meets}</td><td>{pop_txt}</td>"
+               f"<td class=l>{_status_html(st, r.get('flags', []))}</td>")
         if has_truth:
-            row += pair(r["truth"], r["error"], u)
-        if has_anny:
-            row += pair(r.get("truth_anny"), r.get("error_anny"), u)
+            row += "<td>–</td><td>–</td>" if r["truth"] is None else f"<td>{r['truth']:.{d}f}</td><td>{r['error']:+.{d}f}</td>"
         rows.append(row + "</tr>")
     return "<table>" + "".join(rows) + "</table>"
 
 
-def write_report(source, *, max_overlay_frames: int = 6, extra: dict | None = None) -> Path:
-    """Write ``report/index.html``, ``report/measurements.json`` and ``.csv`` for a fitted session
-    (a :class:`~studio.workspace.Workspace`, a :class:`~studio.workspace.Layout` or a folder).
+def _calibration_html(unc: dict, segmentation: dict) -> str:
+    info = unc.get("info", {})
+    rms = info.get("calibration_rms_px", {})
+    cams = sorted(set(rms) | set(segmentation))
+    if not cams:
+        return "<p>No calibration or segmentation figures recorded.</p>"
+    rows = ["<tr><th class=l>camera</th><th>reprojection RMS (px)</th><th>mean silhouette coverage (% of image)</th>"
+            "<th>share explained by the visual hull</th><th>precision</th><th>recall</th></tr>"]
+    for c in cams:
+        s = segmentation.get(c, {})
+        cov = s.get("coverage")
+        rows.append(f"<tr><td class=l>{_esc(c)}</td><td>{_fmt(rms.get(c), 3)}</td>"
+                    f"<td>{_fmt(None if cov is None else 100 * cov, 2)}</td><td>{_fmt(s.get('hull_explained'), 3)}</td>"
+                    f"<td>{_fmt(s.get('precision'), 3)}</td><td>{_fmt(s.get('recall'), 3)}</td></tr>")
+    src = _esc(info.get("calibration_rms_source", "unknown"))
+    return (f"<p>Reprojection error source: {src}; surface uncertainty from it: "
+            f"{_fmt(info.get('surface_sigma_mm'), 2)} mm per point.</p><table>{''.join(rows)}</table>")
 
-    ``extra`` {title: text} adds plain-text notes (e.g. what the demo did not do). Every name
-    the page embeds is HTML-escaped. Raises :class:`~studio.fit.FitError` when the session has
-    no fit results.
-    """
-    from rigs.atomic import atomic_write_text
+
+def page_html(data, *, max_overlay_frames: int = 4) -> str:
+    """The whole page of a :class:`~studio.report.data.ReportData`."""
     from rigs.imageio import read_image
-    from studio.body import BodyModel
-    from studio.fit import OVERLAY_COLORS, load_fits, load_quality
+    from studio.fit import OVERLAY_COLORS
     from studio.fit.quality import summary_line
-    from studio.report.measurements import load_truth, measurement_table, write_measurements
-    from studio.report.views import body_views, png_base64
-    from studio.workspace import Layout, Workspace
+    from studio.report.figures import frames_figure, uncertainty_figure
+    from studio.report.views import LINE_COLOUR, POINT_COLOUR, RING_COLOUR, body_views, figure_base64, png_base64
 
-    t0 = time.perf_counter()
-    lay = source.layout if isinstance(source, Workspace) else source if isinstance(source, Layout) else Layout(source)
-    session_path = lay.source
-    if not session_path.is_dir():
-        raise FitError(f"{session_path}: no such session folder")
-    fits = load_fits(lay)
-    qualities = load_quality(lay)
-    genders = {f.gender for f in fits.values()}
-    gender = sorted(genders)[0]
-    model = BodyModel.load(gender)
-    truth = load_truth(lay)
-    table = measurement_table(model, fits, truth)
-    write_measurements(lay, table)
-    frames = sorted(fits)
-    shape = np.mean([fits[f].shape for f in frames], axis=0)
-    rest = body_views(model.vertices(shape), model.faces)
-    posed = body_views(model.vertices(fits[frames[0]].shape, fits[frames[0]].pose), model.faces, azimuths=(0, 45, 90))
-    seq = {}
-    if lay.fit_sequence.is_file():
-        seq = json.loads(lay.fit_sequence.read_text())
+    p = data.participant
+    frames = sorted(data.fits)
+    qual = summary_line({f: q for f, q in data.qualities.items() if q.get("status") != "unchecked"})
+    unc = data.uncertainty.get("info", {})
+    post = (f"Laplace approximation over the {unc.get('n_leading')} leading shape coefficients on frame(s) "
+            f"{_esc(unc.get('posterior_frames'))}, temperature {unc.get('temperature')}"
+            if unc.get("posterior_frames") else _esc(unc.get("posterior_note", "not computed")))
+    m = data.measured
+    rest = body_views(data.rest_vertices, data.faces, size=(480, 720), points=m.points, lines=m.lines)
+    posed = body_views(data.posed_vertices, data.faces, azimuths=(0, 45, 90), size=(480, 720))
     step = max(1, int(np.ceil(len(frames) / max_overlay_frames)))
     overlay_rows = []
-    fdir = lay.fit_dir / "overlay"
-    cameras = sorted(p.name for p in fdir.iterdir() if p.is_dir()) if fdir.is_dir() else []
     for f in frames[::step]:
-        imgs = []
-        for cam in cameras:
-            p = lay.fit_overlay(cam, f)
-            if p.is_file():
-                im = read_image(p)
-                imgs.append(f'<img src="{png_base64(im[::2, ::2])}" title="{_esc(cam)}" alt="{_esc(cam)}">')
-        c = fits[f].costs
-        q = fits[f].quality
-        overlay_rows.append(f"<h3>frame {_esc(f)} — cost {c['total']:.2f} — "
-                            f"{_status_html(fits[f].status, _reason_texts(q))}</h3><div class='row'>{''.join(imgs)}</div>")
-    legend = " ".join(
-        f"<span class='sw' style='background:rgb{tuple(int(v) for v in col)}'></span>{_esc(name)}"
-        for name, col in OVERLAY_COLORS.items()
-    )
-    timing = np.mean([fits[f].timings.get("total", np.nan) for f in frames])
-    notes = "".join(f"<h3>{_esc(k)}</h3><pre>{_esc(v)}</pre>" for k, v in (extra or {}).items())
-    page = f"""<!doctype html><html><head><meta charset="utf-8"><title>Body fit report — {_esc(session_path.name)}</title>
-<style>body{{font-family:sans-serif;max-width:1100px;margin:auto;padding:1em}} table{{border-collapse:collapse}}
-td,th{{border:1px solid #ccc;padding:3px 8px;text-align:right}} img{{margin:2px;max-width:100%}}
-.sw{{display:inline-block;width:1em;height:1em;margin:0 4px 0 12px;vertical-align:middle;border:1px solid #888}}
-.row{{display:flex;flex-wrap:wrap}}</style></head><body>
-<h1>Body shape and pose from silhouettes</h1>
-<p>Session <code>{_esc(str(session_path))}</code>: {len(frames)} fitted frame(s) ({_esc(str(frames[0]))}…{_esc(str(frames[-1]))}),
-model <b>{_esc(gender)}</b>{' (chosen by lower cost: ' + _esc(json.dumps(seq.get('gender_costs'))) + ')' if seq.get('gender_costs') else ''};
-mean fit time {timing:.1f} s per frame. Thesis ch. 4: annealed particle filter on the pose, staged Nelder–Mead on pose and shape,
-silhouette cost eq. 4.6 with coarse-to-fine pyramid levels.</p>
-<h2>Quality</h2>
-<p>{_esc(summary_line({f: q for f, q in qualities.items() if q.get('status') != 'unchecked'}) or 'no quality gates recorded (fitted before they existed)')}.
-A <b>suspect</b> or <b>failed</b> frame is left out of the measurements while clean frames exist; a figure resting on flagged frames,
-or implausible against ANSUR II, is struck through and marked.</p>
-{_quality_html(qualities)}
-<h2>Measurements</h2>
-<p>From the fitted shape of every frame (lengths in mm, rest pose; arm span in a T-pose).
-Spread = standard deviation over frames (thesis §4.8.6).{' Truth: the simulated person measured with the same definitions as the fit (and, where it differs, with the simulator’s Anny anthropometry).' if truth else ''}</p>
-{_table_html(table)}
-<img src="{_measurement_figure(table)}">
-<h2>Cost per frame</h2><img src="{_cost_figure(fits)}">
-<h2>Fitted body</h2><p>Mean shape over frames, rest pose, front / left / back / right:</p><img src="{png_base64(rest)}">
-<p>Frame {_esc(frames[0])}, fitted pose:</p><img src="{png_base64(posed)}">
-<h2>Overlays</h2><p>Legend: {legend}. One image per camera (half resolution).</p>
+        imgs = [f'<figure style="margin:2px"><img src="{png_base64(read_image(path))}" alt="{_esc(cam)}">'
+                f'<figcaption>{_esc(cam)}</figcaption></figure>' for cam, path in data.overlays.get(f, [])]
+        q = data.fits[f].quality
+        overlay_rows.append(f"<h3>Frame {_esc(f)} — {_status_html(data.fits[f].status, _reason_texts(q))}</h3>"
+                            f"<div class='row'>{''.join(imgs)}</div>")
+    legend = " ".join(f"<span class='sw' style='background:rgb{tuple(int(v) for v in col)}'></span>{_esc(name)}"
+                      for name, col in OVERLAY_COLORS.items())
+    draw_legend = " ".join(f"<span class='sw' style='background:rgb{c}'></span>{t}" for c, t in (
+        (POINT_COLOUR, "landmark"), (RING_COLOUR, "girth"), (LINE_COLOUR, "length, breadth, height")))
+    meta = [("Participant", p.id or "(not given)"), ("Sex", p.sex or f"not given (population: {data.sex})"),
+            ("Age", "not given" if p.age is None else f"{p.age:g} years"), ("Notes", p.notes or "–"),
+            ("Session", data.session_name), ("Body model", data.gender),
+            ("Frames", f"{len(frames)} fitted, {len(data.frames_used)} used for the measurements"),
+            ("Software", f"Silhouette & Shadow Studio {data.version}"),
+            ("Fit settings", json.dumps(data.settings, sort_keys=True)[:600] or "–")]
+    meta_html = "".join(f"<tr><th class=l>{_esc(k)}</th><td>{_esc(v)}</td></tr>" for k, v in meta)
+    title = f"Body measurement report — {p.id or data.session_name}"
+    return f"""<!doctype html><html><head><meta charset="utf-8"><title>{_esc(title)}</title><style>{_CSS}</style></head><body>
+<header><h1>{_esc(title)}</h1><table class=meta>{meta_html}</table></header>
+<h2 class=first>Measurements</h2>
+<p>ISO 7250-1 definitions measured on the fitted body (mean shape over the frames used, standing pose; arm span with the arms
+horizontal). σ combines the spread over frames (standard error of the mean), the calibration's reprojection error carried to
+the body's surface, and the fit's own posterior ({post}). The ISO 20685-1:2018 column is the maximum allowable error of a
+scan-derived measurement; “meets it” compares the 95 % half-width with it. Percentiles against ANSUR II (US Army, 2012) of the
+participant's sex. A figure resting on flagged frames or implausible against the population is struck through and marked.</p>
+{_table_html(data.table)}
+<img src="{figure_base64(uncertainty_figure(data.table))}" alt="measurement uncertainty">
+<h2>Landmarks and measurement lines</h2><p>{draw_legend}. Front, left, back, right.</p><img src="{png_base64(rest)}" alt="body with landmarks">
+<p>Frame {_esc(frames[0])}, fitted pose:</p><img src="{png_base64(posed)}" alt="fitted pose">
+<h2>Quality</h2><p>{_esc(qual or 'no quality gates recorded (fitted before they existed)')}.</p>
+{_quality_html(data.qualities)}
+<img src="{figure_base64(frames_figure(data.fits, data.qualities))}" alt="quality over frames">
+<h2>Calibration and segmentation</h2>{_calibration_html(data.uncertainty, data.segmentation)}
+<h2>Overlays</h2><p>Full resolution, one image per camera. Legend: {legend}.</p>
 {''.join(overlay_rows)}
-{notes}
-<p style="color:#777">Generated {time.strftime('%Y-%m-%d %H:%M:%S')} by <code>studio report</code>.</p>
+<footer>Generated {time.strftime('%Y-%m-%d %H:%M:%S')} by <code>studio report</code> (Silhouette &amp; Shadow Studio {_esc(data.version)}).
+Method: Bălan, Detailed Human Shape and Pose from Images (annealed particle filter and staged Nelder–Mead on the silhouette cost, eq. 4.6).</footer>
 </body></html>"""
-    p = atomic_write_text(lay.report_html, page)
+
+
+def write_report(source, *, participant=None, pdf: bool = False, posterior: bool = True,
+                 max_overlay_frames: int = 4) -> Path:
+    """Write ``report/index.html``, ``report/measurements.json`` and ``.csv`` (and with ``pdf``
+    ``report/report.pdf``) for a fitted session (a :class:`~studio.workspace.Workspace`, a
+    :class:`~studio.workspace.Layout` or a folder); ``participant`` a
+    :class:`~studio.report.data.Participant`. Every name the page embeds is HTML-escaped and no
+    machine path appears in it. Raises :class:`~studio.fit.FitError` when the session has no
+    fit results."""
+    from rigs.atomic import atomic_write_text
+    from studio.report.data import gather
+    from studio.report.measurements import write_measurements
+
+    t0 = time.perf_counter()
+    data = gather(source, participant, posterior=posterior)
+    lay = _layout(source)
+    write_measurements(lay, data.table, data.participant.to_json())
+    p = atomic_write_text(lay.report_html, page_html(data, max_overlay_frames=max_overlay_frames))
+    if pdf:
+        from studio.report.pdf import write_pdf
+
+        write_pdf(data, lay.report_pdf)
     log.info("report written to %s in %.1f s", p, time.perf_counter() - t0)
     return p
+
+
+def _layout(source):
+    from studio.workspace import Layout, Workspace
+
+    return source.layout if isinstance(source, Workspace) else source if isinstance(source, Layout) else Layout(source)

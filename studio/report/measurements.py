@@ -1,4 +1,12 @@
-"""Measurement table of a fitted session (thesis §4.8.6): per-frame values, mean ± std, truth."""
+"""Measurement table of a fitted session: ISO 7250-1 definitions, honest uncertainty, population.
+
+One row per measurement of :data:`studio.body.iso7250.DEFINITIONS` (the fit and the truth by
+the same definitions): per-frame values, mean, spread over frames, the three uncertainty
+components of :mod:`studio.report.uncertainty` combined into a 95 % interval, the ISO
+20685-1:2018 maximum allowable error and whether the interval's half-width meets it, the
+ANSUR II percentile and z-score by sex, quality status with the reasons, and (simulated
+sessions) the truth and the error.
+"""
 
 from __future__ import annotations
 
@@ -7,117 +15,166 @@ from pathlib import Path
 
 import numpy as np
 
-__all__ = ["REPORTED", "measurement_table", "write_measurements"]
+from studio.body.iso7250 import DEFINITIONS, ISO_NAMES
 
-#: Measurements reported, in order (names of :func:`studio.body.measure`).
-REPORTED = ("stature", "arm_span", "shoulder_breadth", "chest_circumference", "waist_circumference",
-            "hip_circumference", "inseam", "arm_length", "mass")
+__all__ = ["REPORTED", "UNITS", "frames_used", "load_truth", "measurement_table", "write_measurements",
+           "write_measurements_csv"]
+
+#: Measurements reported, in order (:data:`studio.body.iso7250.ISO_NAMES`).
+REPORTED = ISO_NAMES
+_DEF = {d.name: d for d in DEFINITIONS}
+#: report unit and factor from SI, per measurement
+UNITS = {d.name: {"m": ("mm", 1000.0), "kg": ("kg", 1.0), "kg/m²": ("kg/m²", 1.0)}[d.unit] for d in DEFINITIONS}
+#: names whose definition did not change with ISO 7250-1 (a truth file written before it still counts)
+_STABLE = ("stature", "arm_span", "waist_circumference", "hip_circumference", "mass")
 
 
-def measurement_table(model, fits: dict, truth: dict | None = None) -> dict:
-    """{name: {"per_frame": {frame: value}, "mean", "std", "unit", "truth", "error", ...}}.
+def _same_definition_truth(truth: dict | None) -> dict:
+    same = (truth or {}).get("studio") or {}
+    if not isinstance(same, dict):
+        raise ValueError(f"truth measurements: 'studio' must be a mapping name → value, got {type(same).__name__}")
+    if same and not all(n in same for n in ISO_NAMES):  # written before the ISO definitions
+        same = {n: same[n] for n in _STABLE if n in same}
+        if "inseam" in (truth or {}).get("studio", {}):
+            same["crotch_height"] = truth["studio"]["inseam"]
+    return same
 
-    Lengths in millimetres, mass in kilograms. ``fits`` {frame: FrameFit}; ``truth`` the
-    session's ``truth/measurements.json`` (metres, kg) or None. ``truth`` is the true
-    person measured by the same definitions as the fit (the file's ``"studio"`` entry,
-    :func:`studio.simulate.session.studio_truth`) when the session has it, else the
-    file's top-level value (the simulator's Anny definitions: waist from Anny's
-    anthropometry, chest/hips from slices of Anny's T-pose); ``truth_source`` says which
-    ("studio", "anny" or None). ``truth_anny`` is always the top-level value (or None);
-    ``error`` = mean − truth and ``error_anny`` = mean − truth_anny.
 
-    Quality (:mod:`studio.fit.quality`): the mean is taken over the frames whose status is
-    ``ok`` (or unchecked); with none, over the ``suspect`` ones, with none, over the ``failed``
-    ones. ``status`` is then the worst status of the frames used, raised by the mean's own
-    ANSUR II z-score (stature, mass, girths); ``flags`` says why, ``frames_used`` which frames
-    count, ``per_frame_status`` every frame's status. A figure is never clean when its frames
-    or its value are not.
+def frames_used(fits: dict) -> tuple[list, str]:
+    """(frames the measurements rest on, their status): the ``ok`` (or unchecked) frames, with
+    none the ``suspect`` ones, with none the ``failed`` ones."""
+    status = {f: getattr(fit, "status", "ok").replace("unchecked", "ok") for f, fit in fits.items()}
+    for level in ("ok", "suspect", "failed"):
+        used = [f for f in sorted(fits) if status[f] == level]
+        if used:
+            return used, level
+    raise ValueError("no fitted frames to measure")
+
+
+def measurement_table(model, fits: dict, truth: dict | None = None, uncertainty: dict | None = None,
+                      sex: str | None = None) -> dict:
+    """{name: row} (module doc), lengths in millimetres, mass in kilograms, BMI in kg/m².
+
+    ``fits`` {frame: FrameFit}; ``truth`` the session's ``truth/measurements.json`` or None:
+    ``truth`` is its ``"studio"`` entry (the true person by the same definitions,
+    :func:`studio.simulate.session.studio_truth`), else Anny's own value (``truth_source``
+    says which); ``truth_anny`` / ``error_anny`` always Anny's. ``uncertainty`` {component:
+    {name: σ (SI)}} for ``calibration`` and ``posterior`` (:mod:`studio.report.uncertainty`);
+    ``sex`` for the population (default: the model's gender).
+
+    Quality (:mod:`studio.fit.quality`): the mean is over the ``ok`` (or unchecked) frames;
+    with none, the ``suspect``, then the ``failed`` ones. ``status`` is the worst status of the
+    frames used, raised by the value's own ANSUR II z-score; ``flags`` say why. A figure is
+    never clean when its frames or its value are not.
     """
     from studio.body import measure
-    from studio.fit.quality import POPULATION_Z, population_z, status_of
+    from studio.fit.quality import POPULATION_Z, status_of
+    from studio.report.population import population_context
+    from studio.report.uncertainty import combine
 
     per = {f: measure(model, fit.shape) for f, fit in sorted(fits.items())}
     status = {f: getattr(fit, "status", "ok").replace("unchecked", "ok") for f, fit in fits.items()}
-    for level in ("ok", "suspect", "failed"):
-        used = [f for f in per if status[f] == level]
-        if used:
-            break
+    used, level = frames_used(fits)
     base_flags = []
     if level != "ok":
         base_flags.append(f"no clean frame: mean over {len(used)} {level} frame(s)")
     elif len(used) < len(per):
         base_flags.append(f"{len(per) - len(used)} flagged frame(s) left out of the mean")
-    same = (truth or {}).get("studio") or {}
-    if not isinstance(same, dict):
-        raise ValueError(f"truth measurements: 'studio' must be a mapping name → value, got {type(same).__name__}")
+    same = _same_definition_truth(truth)
+    unc = uncertainty or {}
+    sex = sex or model.gender
     out = {}
     for name in REPORTED:
-        scale, unit = (1.0, "kg") if name == "mass" else (1000.0, "mm")
+        d = _DEF[name]
+        unit, scale = UNITS[name]
         vals = np.array([per[f][name] for f in used]) * scale
+        mean = float(vals.mean())
+        std = float(vals.std(ddof=1)) if len(vals) > 1 else 0.0
         flags = list(base_flags)
         severities = [] if level == "ok" else [level]
-        z = population_z({name: float(vals.mean()) / scale}, model.gender).get(name)
-        if z is not None and abs(z) > POPULATION_Z[0]:
-            severities.append("failed" if abs(z) > POPULATION_Z[1] else "suspect")
-            flags.append(f"{severities[-1]}: {z:+.1f} σ from ANSUR II ({model.gender})")
-        row_status = status_of([{"severity": sev} for sev in severities])
+        pop = population_context(name, mean / scale, sex)
+        if pop is not None and abs(pop["z"]) > POPULATION_Z[0]:
+            severities.append("failed" if abs(pop["z"]) > POPULATION_Z[1] else "suspect")
+            flags.append(f"{severities[-1]}: {pop['z']:+.1f} σ from ANSUR II ({pop['sex']}): implausible")
+        s_frames = std / np.sqrt(len(vals))
+        s_cal = unc.get("calibration", {}).get(name)
+        s_post = unc.get("posterior", {}).get(name)
+        sigma = combine(s_frames, None if s_cal is None else s_cal * scale, None if s_post is None else s_post * scale)
+        mae = None if d.max_error is None else d.max_error * scale
         row = {
-            "unit": unit,
+            "title": d.title, "clause": d.clause, "kind": d.kind, "definition": d.text, "unit": unit,
             "per_frame": {str(f): float(per[f][name] * scale) for f in per},
             "per_frame_status": {str(f): status[f] for f in per},
             "frames_used": [int(f) for f in used],
-            "status": row_status,
+            "status": status_of([{"severity": s} for s in severities]),
             "flags": flags,
-            "population_z": None if z is None else round(z, 2),
-            "mean": float(vals.mean()),
-            "std": float(vals.std(ddof=1)) if len(vals) > 1 else 0.0,
-            "truth": None,
-            "error": None,
-            "truth_source": None,
-            "truth_anny": None,
-            "error_anny": None,
+            "mean": mean, "std": std,
+            "sigma_frames": float(s_frames),
+            "sigma_calibration": None if s_cal is None else float(s_cal * scale),
+            "sigma_posterior": None if s_post is None else float(s_post * scale),
+            "sigma": sigma,
+            "ci95": [mean - 1.96 * sigma, mean + 1.96 * sigma],
+            "iso20685_max_error": mae,
+            "iso20685_ok": None if mae is None else bool(1.96 * sigma <= mae),
+            "population": pop,
+            "population_z": None if pop is None else pop["z"],
+            "truth": None, "error": None, "truth_source": None, "truth_anny": None, "error_anny": None,
         }
         if truth is not None and truth.get(name) is not None:
             row["truth_anny"] = float(truth[name]) * scale
-            row["error_anny"] = row["mean"] - row["truth_anny"]
+            row["error_anny"] = mean - row["truth_anny"]
         if same.get(name) is not None:
             row["truth"], row["truth_source"] = float(same[name]) * scale, "studio"
         elif row["truth_anny"] is not None:
             row["truth"], row["truth_source"] = row["truth_anny"], "anny"
         if row["truth"] is not None:
-            row["error"] = row["mean"] - row["truth"]
+            row["error"] = mean - row["truth"]
+            row["truth_in_ci95"] = bool(row["ci95"][0] <= row["truth"] <= row["ci95"][1])
         out[name] = row
     return out
 
 
-def write_measurements(layout, table: dict) -> tuple[Path, Path]:
-    """``report/measurements.json`` and ``report/measurements.csv`` of a session
-    (a :class:`~studio.workspace.Layout` or a session folder).
-
-    CSV columns: name, unit, mean, std, status, flags, truth, error, truth_anny, error_anny, then one
-    column per frame (rows of tables without the ``truth_anny`` keys leave them empty).
-    """
+def write_measurements_csv(path, table: dict) -> Path:
+    """The table as CSV: name, unit, mean, std, status, flags, truth, error, truth_anny,
+    error_anny, clause, sigma, ci95_low, ci95_high, iso20685_max_error, iso20685_ok, percentile,
+    z, then one column per frame."""
     import csv
 
-    from rigs.atomic import atomic_open, atomic_write_json
+    from rigs.atomic import atomic_open
+
+    frames = sorted({f for row in table.values() for f in row["per_frame"]}, key=int)
+    with atomic_open(path, "w", newline="", mkdir=True) as fh:
+        w = csv.writer(fh)
+        w.writerow(["name", "unit", "mean", "std", "status", "flags", "truth", "error", "truth_anny", "error_anny",
+                    "clause", "sigma", "ci95_low", "ci95_high", "iso20685_max_error", "iso20685_ok", "percentile", "z"]
+                   + [f"frame_{f}" for f in frames])
+        for name, row in table.items():
+            fmt = (lambda v: "" if v is None else f"{v:.2f}")
+            ci = row.get("ci95") or [None, None]
+            pop = row.get("population") or {}
+            ok = row.get("iso20685_ok")
+            w.writerow([name, row["unit"], fmt(row["mean"]), fmt(row["std"]), row.get("status", "ok"),
+                        "; ".join(row.get("flags", [])), fmt(row["truth"]), fmt(row["error"]),
+                        fmt(row.get("truth_anny")), fmt(row.get("error_anny")), row.get("clause", ""),
+                        fmt(row.get("sigma")), fmt(ci[0]), fmt(ci[1]), fmt(row.get("iso20685_max_error")),
+                        "" if ok is None else ("yes" if ok else "no"), fmt(pop.get("percentile")), fmt(pop.get("z"))]
+                       + [fmt(row["per_frame"].get(f)) for f in frames])
+    return Path(path)
+
+
+def write_measurements(layout, table: dict, participant: dict | None = None) -> tuple[Path, Path]:
+    """``report/measurements.json`` (with the ``participant``) and ``report/measurements.csv``
+    (:func:`write_measurements_csv`) of a session (a :class:`~studio.workspace.Layout` or a
+    session folder)."""
+    from rigs.atomic import atomic_write_json
     from studio.workspace import Layout
 
     layout = layout if isinstance(layout, Layout) else Layout(layout)
     layout.report_dir.mkdir(parents=True, exist_ok=True)
     jp = atomic_write_json(layout.report_measurements_json,
-                           {"format": "studio.measurements", "version": 1, "measurements": table})
-    frames = sorted({f for row in table.values() for f in row["per_frame"]}, key=int)
-    with atomic_open(layout.report_measurements_csv, "w", newline="") as fh:
-        w = csv.writer(fh)
-        w.writerow(["name", "unit", "mean", "std", "status", "flags", "truth", "error", "truth_anny", "error_anny"]
-                   + [f"frame_{f}" for f in frames])
-        for name, row in table.items():
-            fmt = (lambda v: "" if v is None else f"{v:.2f}")
-            w.writerow([name, row["unit"], fmt(row["mean"]), fmt(row["std"]), row.get("status", "ok"),
-                        "; ".join(row.get("flags", [])), fmt(row["truth"]), fmt(row["error"]),
-                        fmt(row.get("truth_anny")), fmt(row.get("error_anny"))]
-                       + [fmt(row["per_frame"].get(f)) for f in frames])
-    return jp, layout.report_measurements_csv
+                           {"format": "studio.measurements", "version": 2, "participant": participant or {},
+                            "measurements": table})
+    return jp, write_measurements_csv(layout.report_measurements_csv, table)
 
 
 def load_truth(layout) -> dict | None:

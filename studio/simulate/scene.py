@@ -15,6 +15,7 @@ import numpy as np
 
 from calibration import Camera, GroundPlane, RigCalibration
 from studio.render import PointLight, light_from_dict, rasterize, shade_raster, shadow_mask, vertex_normals
+from studio.simulate.props import stool_mesh
 from studio.simulate.spec import SimSpec, SpecError
 
 __all__ = [
@@ -114,6 +115,9 @@ def load_body(path: str | Path) -> Body:
 
 
 # --------------------------------------------------------------------------- appearance
+#: Linear albedo of the stool (a mid-grey lacquered wood).
+STOOL_ALBEDO = np.array([0.30, 0.22, 0.15])
+
 LABEL_SKIN, LABEL_TOP, LABEL_BOTTOM, LABEL_SHOES, LABEL_HAIR = range(5)
 
 
@@ -352,6 +356,18 @@ class Scene:
 
         V = self.dressed(frame) if dressed is None else dressed
         F = self.body.faces
+        albedo, is_skin = self.albedo, self.is_skin.astype(np.float32)
+        if normals is None:
+            normals = vertex_normals(V, F)
+        n_person = len(F)
+        stool = self.stool(frame)
+        if stool is not None:  # the person and the stool are one scene: z-buffer and shadows
+            Vs, Fs = stool
+            F = np.concatenate([F, Fs + len(V)])
+            normals = np.concatenate([normals, vertex_normals(Vs, Fs)])
+            V = np.concatenate([V, Vs])
+            albedo = np.concatenate([albedo, np.broadcast_to(STOOL_ALBEDO, (len(Vs), 3))])
+            is_skin = np.concatenate([is_skin, np.zeros(len(Vs), np.float32)])
         bd = self.backdrop(camera)
         penumbra = float(self.spec["sensor"]["penumbra_px"])
         lit, shadow_any = [], np.zeros(bd.floor.shape, bool)
@@ -365,19 +381,26 @@ class Scene:
             lit.append(vis)
         img = bd.radiance(lit)
         ras = rasterize(camera, V, F)
-        if normals is None:
-            normals = vertex_normals(V, F)
-        pix, rad = shade_raster(ras, V, F, normals, self.albedo, self.lights, self.ambient)
+        pix, rad = shade_raster(ras, V, F, normals, albedo, self.lights, self.ambient)
         flat = img.reshape(-1, 3)
         flat[pix] = rad
-        person = ras.mask
-        labels = np.zeros(person.shape, np.uint8)
+        covered = ras.mask
+        labels = np.zeros(covered.shape, np.uint8)
         labels[shadow_any] = 2
-        labels[person] = 1
-        skin_v = self.is_skin.astype(np.float32)
+        labels[covered] = 1
+        if stool is not None:
+            labels[covered & (ras.face >= n_person)] = 3
         face = ras.face.ravel()[pix]
         bary = ras.bary.reshape(-1, 3)[pix]
-        skin_val = np.einsum("nk,nk->n", bary, skin_v[F[face]])
-        skin = np.zeros(person.size, bool)
+        skin_val = np.einsum("nk,nk->n", bary, is_skin[F[face]])
+        skin = np.zeros(covered.size, bool)
         skin[pix] = skin_val > 0.5
-        return FrameRender(img, labels, skin.reshape(person.shape))
+        return FrameRender(img, labels, skin.reshape(covered.shape))
+
+    def stool(self, frame: int) -> tuple[np.ndarray, np.ndarray] | None:
+        """(vertices, faces) of the stool under body frame ``frame``, or None (no stool)."""
+        props = self.body.extra.get("props")
+        if props is None or not np.all(np.isfinite(props[frame])):
+            return None
+        x, y, top, radius = (float(v) for v in props[frame])
+        return stool_mesh(x, y, top, radius)

@@ -3,7 +3,7 @@
 Layout (DESIGN.md "Capture session", written with :class:`rigs.session.SessionWriter`)::
 
     session.json, calibration.json, frames.csv, background/<cam>/, frames/<cam>/
-    truth/labels/<cam>/NNNNNN.png   uint8 0 background, 1 person, 2 shadow (person wins)
+    truth/labels/<cam>/NNNNNN.png   uint8 0 background, 1 person, 2 shadow, 3 object (a stool)
     truth/skin/<cam>/NNNNNN.png     0/255 visible skin
     truth/bodies/NNNNNN.npz         vertices (V, 3) float32 world metres + pose info
     truth/faces.npy                 (F, 3) int32
@@ -169,7 +169,7 @@ def _write_static_truth(scene: Scene, truth: Path, seed: int) -> None:
         "body_frames": [scene.frame_range.start, scene.frame_range.stop],
         "part_names": list(body.part_names), "phenotype": phen,
         "source": str(body.extra.get("source", "")),
-        "labels": {"0": "background", "1": "person", "2": "shadow"},
+        "labels": {"0": "background", "1": "person", "2": "shadow", "3": "object (a prop such as a stool)"},
     })
 
 

@@ -43,6 +43,7 @@ from calibration.rotation import matrix_to_rotvec, rotvec_to_matrix
 from rigs.atomic import atomic_open
 from studio.body.anny_adapter import bone_part
 from studio.body.skeleton import PART_NAMES
+from studio.simulate.props import STOOL_RADIUS, stool_under
 
 __all__ = ["LAB_POSES", "SEQUENCES", "build_truth", "lab_pose", "straight_t_pose", "PART_NAMES", "QUANT_SCALE"]
 
@@ -116,8 +117,8 @@ def _arm(side: str, *rotvecs) -> dict[str, np.ndarray]:
 
 
 #: Postures a lab records, in Anny's bones (degrees; written from anatomy and checked by eye,
-#: independently of the fitter's posture library ``studio.fit.library.FAMILIES``). Seated is
-#: left out: the simulator has no stool to sit on.
+#: independently of the fitter's posture library ``studio.fit.library.FAMILIES``). ``seated``
+#: sits on a stool (:mod:`studio.simulate.props`) that the renderer draws under the body.
 LAB_POSES: dict[str, dict[str, np.ndarray]] = {
     "a_pose": {},
     "t_pose": STATIC_POSES["t_pose"],
@@ -140,7 +141,15 @@ LAB_POSES: dict[str, dict[str, np.ndarray]] = {
             "lowerleg01.R": _rot("x", 85.0), **_arm("L", _rot("x", 35.0), _rot("y", 35.0)),
             **_arm("R", _rot("x", -40.0), _rot("y", -35.0)),
             "lowerarm01.L": _rot("x", -70.0), "lowerarm01.R": _rot("x", -70.0)},
+    "seated": {"upperleg01.L": _compose(_rot("x", -88.0), _rot("y", -6.0)),
+               "upperleg01.R": _compose(_rot("x", -88.0), _rot("y", 6.0)),
+               "lowerleg01.L": _rot("x", 85.0), "lowerleg01.R": _rot("x", 85.0),
+               **_arm("L", _rot("x", -30.0), _rot("y", 30.0)), **_arm("R", _rot("x", -30.0), _rot("y", -30.0)),
+               "lowerarm01.L": _rot("x", -50.0), "lowerarm01.R": _rot("x", -50.0)},
 }
+
+#: Families whose frames get a stool under the body.
+SEATED_FAMILIES = ("seated",)
 
 
 def lab_pose(family: str, rng, jitter_deg: float = 7.0) -> dict[str, np.ndarray]:
@@ -364,6 +373,7 @@ def build_truth(out_dir: str | Path, names: list[str] | None = None, progress=No
         meas["age_years"] = phen["morphological_age_years"]
         n = len(poses)
         world = np.empty_like(V)
+        props = np.full((n, 4), np.nan, dtype=np.float32)  # stool x, y, top, radius (NaN: none)
         yaw = np.zeros(n)
         root = np.zeros((n, 3))
         for i in range(n):
@@ -379,6 +389,8 @@ def build_truth(out_dir: str | Path, names: list[str] | None = None, progress=No
             Wi = Wi + [root[i, 0], root[i, 1], -Wi[:, 2].min()]
             root[i, 2] = -V[i][:, 2].min()
             world[i] = Wi
+            if pose_names[i] in SEATED_FAMILIES:
+                props[i] = (*stool_under(Wi, parts, PART_NAMES.index("pelvis")), STOOL_RADIUS)
         pose_bones = sorted({k for p in poses for k in p})
         rotvecs = np.array([[p.get(b, np.zeros(3)) for b in pose_bones] for p in poses],
                            dtype=np.float32).reshape(n, len(pose_bones), 3)
@@ -397,7 +409,7 @@ def build_truth(out_dir: str | Path, names: list[str] | None = None, progress=No
                 yaw=yaw.astype(np.float32), pose_names=np.array(pose_names),
                 phenotype_names=np.array(list(phen)),
                 phenotype_values=np.array(list(phen.values()), dtype=np.float64),
-                bob=np.asarray(bobs, dtype=np.float32),
+                bob=np.asarray(bobs, dtype=np.float32), props=props,
                 measurements=np.array(json.dumps(meas)),
                 rest_height=((rest[:, 2] - rest[:, 2].min()) / meas["stature"]).astype(np.float16),
                 rest_q=canon[0].astype(np.int16), tpose_q=canon[1].astype(np.int16),

@@ -11,8 +11,8 @@ toolkit derives from it and the simulator's truth::
                     floor_votes/NNNNNN.png
     fit/            NNNNNN.json, NNNNNN.ply, overlay/<cam>/NNNNNN.png, sequence.json, batch.json
     light/          light.json
-    report/         index.html, measurements.json, measurements.csv
-    export/
+    report/         index.html, report.pdf, measurements.json, measurements.csv
+    export/         body_neutral.obj/.glb, frames/NNNNNN.obj/.glb, joints.trc, measurements.csv, model_parameters.json
 
 Frame numbers are formatted by :func:`rigs.session.index_name` only; no other module builds
 one of these paths.
@@ -154,5 +154,28 @@ class Layout:
         return self.report_dir / "measurements.csv"
 
     @property
+    def report_pdf(self) -> Path:
+        return self.report_dir / "report.pdf"
+
+    @property
     def export_dir(self) -> Path:
         return self.root / "export"
+
+    def export_mesh(self, kind: str, ext: str, frame: int | None = None) -> Path:
+        """``export/body_<kind>.<ext>`` (``kind`` "neutral": the rest pose) or, with ``frame``,
+        ``export/frames/NNNNNN.<ext>``."""
+        if frame is None:
+            return self.export_dir / f"body_{kind}.{ext}"
+        return self.export_dir / "frames" / f"{index_name(frame)}.{ext}"
+
+    @property
+    def export_trc(self) -> Path:
+        return self.export_dir / "joints.trc"
+
+    @property
+    def export_csv(self) -> Path:
+        return self.export_dir / "measurements.csv"
+
+    @property
+    def export_parameters(self) -> Path:
+        return self.export_dir / "model_parameters.json"

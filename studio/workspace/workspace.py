@@ -88,12 +88,25 @@ def validate_calibration(calibration, sizes: Mapping[str, tuple[int, int]] | Non
     return warnings
 
 
+def _load_warnings(calibration, source) -> list[str]:
+    """Warnings of the calibration's load (units, up axis, :mod:`calibration.formats.checks`) and
+    of the conversion that made it (``metadata["import_notes"]``, written by ``studio convert``)."""
+    earlier = calibration.metadata.get("import_notes", [])
+    found = list(calibration.warnings) + [f"when imported: {n}" for n in earlier
+                                          if isinstance(n, str) and n.startswith("warning:")]
+    out = [f"{source}: {w}" for w in found]
+    for w in out:
+        log.warning(w)
+    return out
+
+
 class Workspace:
     """A capture session opened for analysis.
 
     Attributes: ``session`` (:class:`rigs.session.Session`), ``path`` (the session folder),
     ``layout`` (where outputs live), ``calibration`` (validated, or None when the session has
-    none), ``warnings`` (from the validation).
+    none; its ``notes`` say what its load read and assumed), ``warnings`` (from the validation,
+    the load's checks and the import that made the file).
     """
 
     def __init__(self, session, calibration, layout: Layout, warnings: list[str]):
@@ -123,6 +136,7 @@ class Workspace:
                 raise WorkspaceError(f"{session.calibration_path}: {exc}") from None
             sizes = {c: session.image_size(c) for c in session.cameras}
             warnings = validate_calibration(calibration, sizes, source=session.calibration_path)
+            warnings += _load_warnings(calibration, session.calibration_path)
         layout = Layout(session.path if out is None else Path(out), source=session.path)
         return cls(session, calibration, layout, warnings)
 

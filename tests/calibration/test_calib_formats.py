@@ -313,10 +313,15 @@ def test_toml_anipose_layout_and_matrix_rotation(tmp_path):
     """anipose sections are cam_0.. with a name field; some writers store R as 3x3."""
     path = tmp_path / "calibration.toml"
     path.write_text(TOML_OK.format(name="A", rotation="[[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]]", fisheye="false"))
-    rig = RigCalibration.from_toml(path)
+    rig = RigCalibration.load_any(path, z_down="keep")
     assert rig.camera_names == ["A"] and rig["A"].size == (640, 480)
     np.testing.assert_array_equal(rig["A"].R, np.eye(3))
     assert rig.ground.allclose(GroundPlane.floor())
+    # R = I and t = (.., 3): the camera stands 3 m below the floor z = 0 — a Z-down world,
+    # which a plain load turns half a turn about X (the camera projects as before)
+    flipped = RigCalibration.from_toml(path)
+    np.testing.assert_array_equal(flipped["A"].R, np.diag([1.0, -1.0, -1.0]))
+    assert flipped["A"].center[2] > 2.9 and any("turned half a turn about X" in n for n in flipped.notes)
 
 
 def test_toml_write_errors(tmp_path):

@@ -138,7 +138,7 @@ def test_mesh_export_round_trip(model, tmp_path):
     assert np.allclose(v2, v, atol=1e-6) and np.array_equal(f2, model.faces)
     obj = model.save_mesh(tmp_path / "body.obj", v).read_text().splitlines()
     assert sum(line.startswith("v ") for line in obj) == model.n_vertices
-    with pytest.raises(ValueError, match="must be .ply or .obj"):
+    with pytest.raises(ValueError, match=r"must be \.ply, \.obj or \.glb"):
         model.save_mesh(tmp_path / "body.stl", v)
 
 

@@ -163,3 +163,27 @@ def test_bad_inputs():
         SilhouetteTarget.build(observed, xi=float("inf"))
     with pytest.raises(ValueError, match="mask_size: "):
         SilhouetteTarget.build(observed, mask_size="fast")
+
+
+def test_ignored_pixels_need_no_explaining_but_may_be_covered():
+    """``ignore``: the observed-to-model term is the whole-image definition against the observed
+    silhouette less the ignored region; the model-to-observed term still counts the ignored
+    pixels as observed (a model covering them pays nothing)."""
+    observed, model = views()
+    prop = [ellipse(50, 40, 8, 20), np.zeros((H, W), bool), ellipse(50, 60, 6, 6)]
+    seen = [o | p for o, p in zip(observed, prop)]
+    tau = 7.5
+    target = SilhouetteTarget.build(seen, tau=tau, ignore=[prop[0], None, prop[2]])
+    cost = silhouette_cost(target, model)
+    for k in range(3):
+        assert cost.model_to_observed[k] == pytest.approx(truncated_chamfer(model[k], seen[k], tau), rel=1e-9)
+        assert cost.observed_to_model[k] == pytest.approx(truncated_chamfer(seen[k] & ~prop[k], model[k], tau), rel=1e-9)
+    assert cost.observed_to_model[0] < truncated_chamfer(seen[0], model[0], tau) - 0.5
+    # the body alone explains all but the prop, and covering the prop is free
+    assert silhouette_cost(target, observed).total == 0.0
+    assert silhouette_cost(target, seen).total == 0.0
+    # coarser levels ignore the blocks the downsampled prop covers
+    coarse = SilhouetteTarget.build(seen, tau=tau, ignore=[prop[0], None, prop[2]], level=1)
+    np.testing.assert_array_equal(coarse.masks[0], downsample_mask(seen[0], 1) & ~downsample_mask(prop[0], 1))
+    with pytest.raises(ValueError, match="ignore: got 1 masks for 3"):
+        SilhouetteTarget.build(seen, tau=tau, ignore=[prop[0]])

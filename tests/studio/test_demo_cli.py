@@ -54,7 +54,9 @@ def test_demo_runs_the_pipeline_and_says_what_is_missing(tmp_path, monkeypatch, 
     assert "Not done yet" in out and "light" in out
     assert f"report: {(session / 'report' / 'index.html').resolve()}" in out
     html = (session / "report" / "index.html").read_text()
-    assert "What the demo does not do yet" in html
+    assert "Not done yet" not in html and "does not do" not in html  # the report is for a study, not about the demo
+    assert str(tmp_path) not in html  # no machine path in the page
+    assert (session / "report" / "report.pdf").read_bytes().startswith(b"%PDF")
 
 
 def test_demo_rejects_a_missing_spec(tmp_path, capsys):

@@ -119,7 +119,7 @@ def test_cli_fit_then_report(tmp_path, capsys, monkeypatch):
     table = json.loads((tmp_path / "s" / "report" / "measurements.json").read_text())["measurements"]
     assert 1400 < table["stature"]["mean"] < 2000 and table["stature"]["unit"] == "mm"
     csv = (tmp_path / "s" / "report" / "measurements.csv").read_text().splitlines()
-    assert csv[0].startswith("name,unit,mean,std,status,flags,truth,error") and len(csv) == 10
+    assert csv[0].startswith("name,unit,mean,std,status,flags,truth,error") and len(csv) == 21  # 20 ISO measurements
     assert main(["report", str(tmp_path / "absent")]) == 1
 
 

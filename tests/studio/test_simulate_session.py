@@ -270,3 +270,53 @@ def test_two_lights_penumbra_and_loose_clothing(tmp_path):
     naked = silhouette(cam, scene.true_vertices(1), scene.body.faces).sum()
     assert dressed > naked * 1.05
     assert np.array_equal(r.labels == 1, silhouette(cam, V, scene.body.faces))
+
+
+def test_stool_geometry_and_placement():
+    """The stool is three closed, outward-wound cylinders (volume by the divergence theorem =
+    the analytic volume) and sits under the body, touching its lowest point over the seat."""
+    from studio.simulate.props import stool_mesh, stool_under
+
+    V, F = stool_mesh(0.3, -0.2, 0.47, 0.17, sides=64)
+    a, b, c = V[F[:, 0]], V[F[:, 1]], V[F[:, 2]]
+    volume = np.einsum("ij,ij->i", a, np.cross(b, c)).sum() / 6
+    ring = lambda r: 0.5 * 64 * r**2 * np.sin(2 * np.pi / 64)  # noqa: E731 - polygon area
+    expected = ring(0.17) * 0.04 + ring(0.035) * (0.47 - 0.04 - 0.02) + ring(0.7 * 0.17) * 0.02
+    assert volume == pytest.approx(expected, rel=1e-9)
+    assert V[:, 2].min() == 0.0 and V[:, 2].max() == pytest.approx(0.47)
+    with pytest.raises(ValueError, match="above 0.1 m"):
+        stool_mesh(0.0, 0.0, 0.05)
+    # a body: pelvis blob centred at (0.1, 0.2), its lowest point within the seat at 0.45 m
+    body = np.array([[0.1, 0.2, 0.50], [0.1, 0.3, 0.45], [0.1, 0.2, 0.9], [0.9, 0.9, 0.0]])
+    parts = np.array([0, 0, 1, 2])
+    x, y, top = stool_under(body, parts, pelvis=0)
+    assert (x, y) == pytest.approx((0.1, 0.25)) and top == pytest.approx(0.45)
+
+
+def test_stool_is_foreground_labelled_object_and_casts_shadow(tmp_path):
+    """A frame with a stool: label 3 covers the stool's own silhouette where the person is not
+    in front of it, label 1 the person's where the stool is not, and the stool's shadow joins
+    the person's (label 2)."""
+    spec = make_spec(tmp_path / "a")
+    body = tmp_path / "a" / "body.npz"
+    arrays = dict(np.load(body))
+    arrays["props"] = np.array([[0.0, 0.0, 0.5, 0.17], [np.nan] * 4, [np.nan] * 4], np.float32)
+    arrays["vertices_q"][0, :, 0] += int(0.3 / QUANT_SCALE)  # frame 0: the person stands behind it
+    np.savez_compressed(body, **arrays)
+    scene = Scene(load_spec(spec), seed=0)
+    Vs, Fs = scene.stool(0)
+    V = scene.dressed(0)
+    overlap = 0
+    for cam in scene.cameras:
+        r = scene.render(0, cam)
+        person = silhouette(cam, V, scene.body.faces)
+        stool = silhouette(cam, Vs, Fs)
+        assert stool.sum() > 100
+        # where both cover a pixel the z-buffer decides: each label is its silhouette less the other's front
+        assert np.array_equal(r.labels == 3, stool & ~(r.labels == 1))
+        assert np.array_equal(r.labels == 1, person & ~(r.labels == 3))
+        overlap += int((stool & person).sum())
+        both = shadow_mask(cam, np.vstack([V, Vs]), np.vstack([scene.body.faces, Fs + len(V)]), scene.lights[0])
+        assert np.array_equal(r.labels == 2, both & ~person & ~stool & scene.backdrop(cam).floor)
+    assert overlap > 20  # the person hides part of the stool in some view: the z-buffer was exercised
+    assert scene.stool(1) is None and not np.any(scene.render(1, scene.cameras[0]).labels == 3)

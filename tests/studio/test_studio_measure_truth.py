@@ -10,8 +10,9 @@ import numpy as np
 import pytest
 
 from studio.body import BodyModel, measure
+from studio.body.iso7250 import ISO_NAMES
 from studio.body.measure import MEASUREMENT_NAMES, measure_anny_body, measure_mesh, place_canonical, t_pose
-from studio.report.measurements import REPORTED, measurement_table, write_measurements
+from studio.report.measurements import REPORTED, UNITS, measurement_table, write_measurements
 from studio.simulate.session import studio_truth
 
 ROOT = Path(__file__).resolve().parents[2] / "studio" / "samples"
@@ -44,12 +45,12 @@ def test_measure_mesh_is_what_measure_computes(female):
     vt = female.vertices(shape, t_pose(female, shape))
     got = measure_mesh(v, vt, female.joints(shape), female.faces, female.parts, female.face_parts)
     assert got == want  # bit for bit: measure is measure_mesh on the model's meshes
-    assert set(got) == set(MEASUREMENT_NAMES)
+    assert set(got) == set(MEASUREMENT_NAMES) | set(ISO_NAMES)
     # a translated body measures the same (only the sagittal plane x = 0 is fixed)
     shift = np.array([0.0, 0.4, 0.25])
     moved = measure_mesh(v + shift, vt + shift, female.joints(shape) + shift, female.faces,
                          female.parts, female.face_parts)
-    for k in MEASUREMENT_NAMES:
+    for k in got:
         assert moved[k] == pytest.approx(want[k], abs=2e-3), k
 
 
@@ -84,7 +85,7 @@ def test_walk_truth_by_our_definitions_agrees_with_anny_where_they_coincide(walk
     head): within 5 mm. Volume/mass: our decimated topology vs Anny's mesh, within 1 %."""
     anny = json.loads(str(walk["measurements"]))
     t = walk_truth
-    assert set(t) == set(MEASUREMENT_NAMES)
+    assert set(t) == set(MEASUREMENT_NAMES) | set(ISO_NAMES)
     assert t["stature"] == pytest.approx(anny["stature"], abs=0.005)
     assert t["mass"] == pytest.approx(anny["mass"], rel=0.01)
     # waist by our definition (narrowest trunk slice) is well below Anny's anthropometric waist
@@ -149,7 +150,7 @@ def test_report_prefers_same_definition_truth_and_keeps_anny(female, walk, walk_
     table = measurement_table(female, fits, dict(anny, studio=walk_truth))
     for name in REPORTED:
         r = table[name]
-        scale = 1.0 if name == "mass" else 1000.0
+        scale = UNITS[name][1]
         assert r["truth_source"] == "studio"
         assert r["truth"] == pytest.approx(walk_truth[name] * scale)
         assert r["error"] == pytest.approx(r["mean"] - r["truth"])
@@ -159,7 +160,8 @@ def test_report_prefers_same_definition_truth_and_keeps_anny(female, walk, walk_
     assert table["arm_span"]["truth_anny"] is None and table["arm_span"]["error_anny"] is None
     _, csv_path = write_measurements(tmp_path, table)
     rows = csv_path.read_text().splitlines()
-    assert rows[0].startswith("name,unit,mean,std,status,flags,truth,error,truth_anny,error_anny,frame_0,frame_4")
+    assert rows[0].startswith("name,unit,mean,std,status,flags,truth,error,truth_anny,error_anny,clause,sigma,")
+    assert rows[0].endswith(",frame_0,frame_4")
     arm = next(r.split(",") for r in rows if r.startswith("arm_span"))
     assert arm[4] == "ok" and arm[6] == f"{walk_truth['arm_span'] * 1000:.2f}" and arm[8] == arm[9] == ""
 

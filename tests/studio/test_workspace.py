@@ -117,3 +117,17 @@ def test_session_info_check_validates_the_calibration(tmp_path, capsys):
     _session(tmp_path / "good", _calibration())
     assert main(["session", "info", str(tmp_path / "good"), "--check"]) == 0
     assert "calibration valid" in capsys.readouterr().out
+
+
+def test_the_calibration_load_notes_and_import_warnings_reach_the_workspace(tmp_path):
+    """What the load read and assumed is on ``ws.calibration.notes``; warnings of the load and of
+    the ``studio convert`` that made the file join ``ws.warnings``."""
+    calib = _calibration()
+    calib = calib.replace(metadata={"import_notes": ["format: toml", "warning: units: m assumed — too few to tell"]})
+    ws = Workspace.open(_session(tmp_path / "s", calib))
+    assert "up axis: Z up (cameras 2.00 m above the floor)" in ws.calibration.notes
+    assert len(ws.warnings) == 1 and ws.warnings[0].endswith("when imported: warning: units: m assumed — too few to tell")
+    below = calib.replace(cameras={n: c.replace(R=c.R @ np.diag([1.0, -1.0, -1.0])) for n, c in calib.cameras.items()},
+                          metadata={})
+    ws = Workspace.open(_session(tmp_path / "b", below))
+    assert len(ws.warnings) == 1 and "the world's Z axis points down" in ws.warnings[0]

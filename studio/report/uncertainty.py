@@ -1,0 +1,203 @@
+"""Uncertainty of the reported measurements: three independent sources, combined.
+
+1. **Frames**: the spread of the per-frame values over the frames used (the body's shape does
+   not change between frames), as the standard error of their mean, ``std / √n``.
+2. **Calibration**: a reprojection error of ``e`` px at distance ``Z`` with focal length ``f``
+   moves a silhouette's back-projected boundary by ``e·Z / f`` metres; ``N`` views averaging
+   independent errors give ``σ_b = sqrt(mean_i (e_i Z_i / f_i)²) / √N`` per surface point.
+   A height, breadth, depth or length spans two such points: ``√2·σ_b``; a girth moves with the
+   section's radius: ``2π·σ_b``; the volume with the surface area: ``A·σ_b`` (× density for
+   mass); BMI by first-order propagation from mass and stature. The reprojection error per
+   camera comes from the calibration's metadata (bundle adjustment or intrinsic RMS);
+   a simulated session's calibration is exact (0 px); an unknown one is taken as
+   :data:`ASSUMED_RMS_PX` and said so.
+3. **Fit posterior** (Laplace approximation): the silhouette cost (eq. 4.6) as a negative log
+   likelihood at temperature :data:`TEMPERATURE` (cost units, i.e. pixels of mean silhouette
+   disagreement) plus the model's Gaussian shape prior N(0, σ²) on the leading
+   :data:`N_LEADING` shape coefficients (those the fitter frees), pose held at the fit; its
+   Hessian by a quadratic fitted to the cost on a ±``STEP`` σ design, the covariance
+   carried into every measurement through its Jacobian (central differences of
+   :func:`studio.body.measure`).
+
+The combined standard uncertainty is the root sum of squares, the 95 % interval ±1.96 of it.
+"""
+
+from __future__ import annotations
+
+import logging
+
+import numpy as np
+
+__all__ = [
+    "ASSUMED_RMS_PX",
+    "N_LEADING",
+    "TEMPERATURE",
+    "calibration_rms",
+    "calibration_sigma",
+    "calibration_terms",
+    "combine",
+    "laplace_shape_covariance",
+    "measurement_jacobian",
+    "session_uncertainty",
+]
+
+log = logging.getLogger(__name__)
+
+#: reprojection error assumed for a calibration that records none (pixels)
+ASSUMED_RMS_PX = 0.5
+#: shape coefficients the posterior covers (the leading PCA directions)
+N_LEADING = 10
+#: cost units per unit of negative log likelihood (module doc, 3.). Chosen on the model-prior
+#: people of ``benchmarks/measurements.py`` (4 people, 18 lengths each): 95 % intervals held
+#: the truth 90 % of the time at 0.1, 92 % at 0.3, 97 % at 0.5; the walk's Anny woman: 100 %.
+TEMPERATURE = 0.5
+#: finite-difference step in prior standard deviations
+STEP = 0.25
+
+
+def calibration_rms(calibration) -> tuple[dict[str, float], str]:
+    """({camera: reprojection RMS px}, where it came from) of a :class:`~calibration.RigCalibration`."""
+    meta = dict(getattr(calibration, "metadata", {}) or {})
+    names = list(calibration.cameras)
+    ext = meta.get("extrinsics")
+    if isinstance(ext, dict) and isinstance(ext.get("camera_rms_px"), dict):
+        per = ext["camera_rms_px"]
+        return {n: float(per.get(n, ext.get("rms_px", ASSUMED_RMS_PX))) for n in names}, "bundle adjustment"
+    intr = meta.get("intrinsics")
+    if isinstance(intr, dict) and all(isinstance(intr.get(n), dict) and "rms_px" in intr[n] for n in names):
+        return {n: float(intr[n]["rms_px"]) for n in names}, "intrinsic calibration"
+    if meta.get("source") == "studio simulate":
+        return {n: 0.0 for n in names}, "simulated (exact calibration)"
+    return {n: ASSUMED_RMS_PX for n in names}, f"none recorded: {ASSUMED_RMS_PX} px assumed"
+
+
+def calibration_sigma(cameras, rms: dict, centre) -> float:
+    """σ_b (metres) of a surface point at ``centre`` (3,) (module doc, 2.)."""
+    c = np.asarray(centre, dtype=np.float64)
+    terms = []
+    for cam in cameras:
+        z = float((cam.R @ c + np.ravel(cam.t))[2])
+        f = float(0.5 * (cam.K[0, 0] + cam.K[1, 1]))
+        terms.append((rms.get(cam.name, ASSUMED_RMS_PX) * abs(z) / f) ** 2)
+    return float(np.sqrt(np.mean(terms) / len(terms))) if terms else 0.0
+
+
+def calibration_terms(sigma_b: float, values: dict, area: float, density: float = 980.0) -> dict[str, float]:
+    """{measurement: standard uncertainty (SI)} from a surface uncertainty ``sigma_b`` (module doc, 2.)."""
+    from studio.body.iso7250 import DEFINITIONS
+
+    out = {}
+    for d in DEFINITIONS:
+        if d.kind in ("height", "breadth", "depth", "length"):
+            out[d.name] = np.sqrt(2.0) * sigma_b
+        elif d.kind in ("small_girth", "large_girth"):
+            out[d.name] = 2 * np.pi * sigma_b
+    out["mass"] = density * area * sigma_b
+    m, s = values["mass"], values["stature"]
+    out["bmi"] = float(np.hypot(out["mass"] / s**2, 2 * m / s**3 * out["stature"]))
+    return {k: float(v) for k, v in out.items()}
+
+
+def measurement_jacobian(model, shape, names, k: int = N_LEADING) -> np.ndarray:
+    """(M, k) derivatives of measurements ``names`` w.r.t. the first ``k`` shape coefficients
+    (central differences of 0.1 σ)."""
+    from studio.body import measure
+
+    sigma = np.sqrt(np.asarray(model.eigenvalues, dtype=np.float64))
+    J = np.zeros((len(names), k))
+    for i in range(k):
+        h = 0.1 * sigma[i]
+        d = np.zeros_like(np.asarray(shape, dtype=np.float64))
+        d[i] = h
+        hi, lo = measure(model, shape + d), measure(model, shape - d)
+        J[:, i] = [(hi[n] - lo[n]) / (2 * h) for n in names]
+    return J
+
+
+def laplace_shape_covariance(model, cameras, masks, shape, pose, *, level: int = 1, k: int = N_LEADING,
+                             temperature: float = TEMPERATURE) -> np.ndarray:
+    """(k, k) posterior covariance of the first ``k`` shape coefficients of one fitted frame
+    (module doc, 3.): Hessian of cost/T fitted on a ±STEP·σ design, plus the prior's 1/σ²."""
+    from studio.fit.frame import FitOptions, build_targets
+    from studio.fit.objective import FrameObjective
+
+    targets = build_targets(list(masks), [c.name for c in cameras], FitOptions(levels=(level, level, level)))
+    obj = FrameObjective(model, list(cameras), targets, np.asarray(shape, dtype=np.float64), n_shape_free=k)
+    x0 = obj.pack(shape, pose)
+    sigma = np.sqrt(np.asarray(model.eigenvalues, dtype=np.float64))[:k]
+    h = STEP * sigma
+    # design: centre, ±h e_i (the curvature along each axis), and random ±h sign vectors (the
+    # couplings; 1.5 per coefficient pair, seeded): ~1 + 2k + 0.75 k² evaluations
+    rng = np.random.default_rng(0)
+    n_pairs = k * (k - 1) // 2
+    D = np.concatenate([np.zeros((1, k)), np.eye(k), -np.eye(k),
+                        rng.choice([-1.0, 1.0], size=(int(np.ceil(1.5 * n_pairs)) + 1, k))])
+    X = np.repeat(x0[None], len(D), axis=0)
+    X[:, -k:] += D * h
+    c = obj(X, level) / temperature
+    # quadratic in scaled coordinates u = d/h: c ≈ a + g·u + ½ uᵀ H u
+    iu = np.triu_indices(k)
+    cols = [np.ones(len(D))] + [D[:, i] for i in range(k)]
+    cols += [D[:, i] * D[:, j] * (0.5 if i == j else 1.0) for i, j in zip(*iu)]
+    coef = np.linalg.lstsq(np.stack(cols, axis=1), c, rcond=None)[0]
+    H = np.zeros((k, k))
+    H[iu] = coef[1 + k:]
+    H = H + np.triu(H, 1).T
+    w, V = np.linalg.eigh(H)
+    H = (V * np.maximum(w, 0.0)) @ V.T  # a noisy cost may curve down: no information there
+    H = H / np.outer(h, h) + np.diag(1.0 / sigma**2)
+    return np.linalg.inv(H)
+
+
+def combine(*sigmas) -> float:
+    """Root sum of squares of the standard uncertainties given (None skipped)."""
+    return float(np.sqrt(sum(s * s for s in sigmas if s is not None)))
+
+
+def session_uncertainty(model, cameras, calibration, fits: dict, frames, masks_of, *, max_frames: int = 3,
+                        temperature: float | None = None) -> dict:
+    """The calibration and posterior components (module doc) of a fitted session:
+    ``{"calibration": {name: σ}, "posterior": {name: σ}, "info": {...}}`` (SI units).
+
+    ``fits`` {frame: FrameFit}; ``frames`` the frames the measurements rest on; ``masks_of``
+    ``frame -> list of (H, W) bool`` in ``cameras`` order, or None (no posterior: the session's
+    segmentation is not at hand). The posterior averages the Laplace covariances of at most
+    ``max_frames`` of ``frames``; ``temperature`` defaults to :data:`TEMPERATURE`.
+    """
+    from studio.body import measure
+    from studio.body.iso7250 import ISO_NAMES
+
+    frames = list(frames)
+    temperature = TEMPERATURE if temperature is None else float(temperature)
+    shape = np.mean([fits[f].shape for f in frames], axis=0)
+    rms, source = calibration_rms(calibration)
+    first = fits[frames[0]]
+    V = model.vertices(first.shape, first.pose)
+    sigma_b = calibration_sigma(cameras, rms, V.mean(axis=0))
+    rest = model.vertices(shape)
+    a, b, c = (rest[model.faces[:, i]] for i in range(3))
+    area = float(0.5 * np.linalg.norm(np.cross(b - a, c - a), axis=1).sum())
+    values = measure(model, shape)
+    out = {"calibration": calibration_terms(sigma_b, values, area), "posterior": {},
+           "info": {"calibration_rms_px": rms, "calibration_rms_source": source,
+                    "surface_sigma_mm": 1000 * sigma_b, "posterior_frames": [], "n_leading": N_LEADING,
+                    "temperature": temperature}}
+    if masks_of is None:
+        out["info"]["posterior_note"] = "no segmentation at hand: fit posterior not computed"
+        return out
+    covs = []
+    for f in frames[:max_frames]:
+        try:
+            covs.append(laplace_shape_covariance(model, cameras, masks_of(f), fits[f].shape, fits[f].pose,
+                                                 temperature=temperature))
+            out["info"]["posterior_frames"].append(int(f))
+        except (OSError, ValueError) as exc:
+            log.warning("frame %s: no posterior (%s)", f, exc)
+    if not covs:
+        out["info"]["posterior_note"] = "no frame's silhouettes could be read: fit posterior not computed"
+        return out
+    C = np.mean(covs, axis=0)
+    J = measurement_jacobian(model, shape, ISO_NAMES)
+    sd = np.sqrt(np.maximum(np.einsum("ij,jk,ik->i", J, C, J), 0.0))
+    out["posterior"] = {n: float(s) for n, s in zip(ISO_NAMES, sd, strict=True)}
+    return out

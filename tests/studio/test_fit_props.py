@@ -1,0 +1,59 @@
+"""A seat in the silhouettes (studio.fit.props): found under a seated body on a stool, not
+under a squat or a standing body, and its ignored pixels are the stool's."""
+
+import numpy as np
+import pytest
+
+from studio.body import BodyModel
+from studio.body.skeleton import PART_NAMES
+from studio.fit.library import family_pose, stand_on_floor
+from studio.fit.props import MIN_THIGH_ANGLE, find_support, seat_of, thigh_angles
+from studio.render import silhouette
+from studio.simulate.props import stool_mesh, stool_under
+
+from test_fit_frame import ring_cameras
+
+
+@pytest.fixture(scope="module")
+def model():
+    return BodyModel.load("male")
+
+
+def posed(model, family, yaw=0.7):
+    pose = family_pose(model, family)
+    pose[:2], pose[5] = [0.1, -0.05], yaw
+    pose = stand_on_floor(model, model.mean_shape(), pose[None])[0]
+    return pose, model.vertices(model.mean_shape(), pose)
+
+
+def test_support_found_under_a_seated_body_and_only_the_stool_ignored(model):
+    cams = ring_cameras()
+    pose, V = posed(model, "seated")
+    x, y, top = stool_under(V, model.parts, PART_NAMES.index("pelvis"))
+    assert seat_of(V, model.parts) == pytest.approx((x, y, top))  # one definition of the seat
+    Vs, Fs = stool_mesh(x, y, top)
+    body = [silhouette(c, V, model.faces) for c in cams]
+    stool = [silhouette(c, Vs, Fs) for c in cams]
+    support = find_support(model, cams, [b | s for b, s in zip(body, stool)], model.mean_shape(), pose)
+    assert support is not None and support.seat == pytest.approx(top)
+    import cv2
+
+    for b, s, ign in zip(body, stool, support.ignore):
+        # exactly the stool's visible pixels, less a 2-pixel rim around the body
+        rim = cv2.dilate(b.view(np.uint8), np.ones((5, 5), np.uint8)).astype(bool)
+        np.testing.assert_array_equal(ign, s & ~rim)
+    js = support.to_json([c.name for c in cams])
+    assert js["seat_height_m"] == pytest.approx(top, abs=1e-4) and set(js["views"]) == {c.name for c in cams}
+
+
+@pytest.mark.parametrize("family", ["half_squat", "a_pose"])
+def test_no_support_without_a_prop(model, family):
+    cams = ring_cameras()
+    pose, V = posed(model, family)
+    masks = [silhouette(c, V, model.faces) for c in cams]
+    assert find_support(model, cams, masks, model.mean_shape(), pose) is None
+    angles = thigh_angles(model, model.mean_shape(), pose)
+    if family == "a_pose":  # standing: not a sitting posture at all
+        assert max(angles) < MIN_THIGH_ANGLE
+    else:  # a squat sits as low as a stool; nothing is observed under it
+        assert min(angles) > MIN_THIGH_ANGLE

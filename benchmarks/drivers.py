@@ -8,7 +8,8 @@ wheel's ``viky.cti`` producer, RGBa8 400×400, at 60 Hz: its devices send no tim
 their frame counters drift apart, so they cannot form a synchronised rig). Every row runs the full path: driver
 → pixel conversion → SyncGroup → Recorder writing PNG level 0 to a temporary session. CPU is
 this process's CPU time over wall time (2.0 = two cores busy). Drops = incomplete instants +
-stream underruns + recorder drops. A backend whose package is missing is reported, not run.
+stream underruns + recorder drops while recording (the instants lost while the cameras start one
+after another, before the warm-up ends, are not counted). A backend whose package is missing is reported, not run.
 
     .venv/bin/python benchmarks/drivers.py [--seconds 20]
 """
@@ -66,7 +67,8 @@ def record(desc: dict, out: Path, seconds: float) -> dict:
     from rigs import Recorder, Rig, SessionWriter
 
     with Rig.open(desc) as rig:
-        list(rig.multiframes(10, timeout=5.0))  # warm up: caches, first buffers
+        list(rig.multiframes(10, timeout=5.0))  # warm up: caches, first buffers, cameras started in turn
+        before = rig.stats.sync.incomplete, sum(c.device_stats().get("n_underruns", 0) for c in rig.cameras.values())
         writer = SessionWriter.create(out, rig.camera_names, rig=desc["name"], fps=ANCHOR, compression=0)
         t0, c0, n = time.perf_counter(), time.process_time(), 0
         with Recorder(writer, queue_size=64) as rec:
@@ -77,11 +79,11 @@ def record(desc: dict, out: Path, seconds: float) -> dict:
                     break
         wall, cpu = time.perf_counter() - t0, time.process_time() - c0
         sync, rstats = rig.stats.sync, rec.stats
-        underruns = sum(c.device_stats().get("n_underruns", 0) for c in rig.cameras.values())
+        underruns = sum(c.device_stats().get("n_underruns", 0) for c in rig.cameras.values()) - before[1]
         queue_drops = sum(c.queue_dropped for c in rig.stats.cameras.values())
         shape = next(iter(mf.images.values())).shape
     return {"multiframes_per_s": round(n / wall, 1), "cpu_cores": round(cpu / wall, 2),
-            "incomplete": int(sync.incomplete), "underruns": int(underruns), "queue_drops": int(queue_drops),
+            "incomplete": int(sync.incomplete - before[0]), "underruns": int(underruns), "queue_drops": int(queue_drops),
             "recorder_dropped": int(rstats.dropped), "image": list(shape), "cameras": len(desc["cameras"])}  # fmt: skip
 
 

@@ -9,12 +9,17 @@ VENV   := .venv
 PY     := $(VENV)/bin/python
 STAMP  := $(VENV)/.installed
 EXTRAS ?= test
+# camera drivers the tests exercise: Aravis (library, introspection data, what PyGObject
+# builds against) from Debian, then the [genicam] and [aravis] extras
+DRIVERS       := $(VENV)/.drivers
+DRIVER_DEBS   := gir1.2-aravis-0.8 libgirepository1.0-dev libcairo2-dev pkg-config gcc python3-dev
+DRIVER_EXTRAS ?= genicam,aravis
 
 .PHONY: demo test bench setup clean help
 
 help:
 	@echo "make demo   run the main job on the shipped sample sequence (sets everything up first)"
-	@echo "make test   run the test suite (sets everything up first)"
+	@echo "make test   run the test suite (sets everything up first, camera drivers included)"
 	@echo "make bench  run every benchmark in benchmarks/ (results in benchmarks/results/)"
 	@echo "make clean  remove the virtualenv and caches"
 
@@ -34,7 +39,17 @@ $(STAMP): pyproject.toml
 demo: $(STAMP)
 	$(VENV)/bin/studio demo
 
-test: $(STAMP)
+$(DRIVERS): $(STAMP)
+	@if ! dpkg -s $(DRIVER_DEBS) >/dev/null 2>&1; then \
+	    echo "installing the Aravis camera library and PyGObject's build dependencies (needs root)"; \
+	    $$( [ "$$(id -u)" = 0 ] || echo sudo ) apt-get update -qq && \
+	    $$( [ "$$(id -u)" = 0 ] || echo sudo ) env DEBIAN_FRONTEND=noninteractive apt-get install -y -qq $(DRIVER_DEBS) \
+	    || echo "warning: could not install $(DRIVER_DEBS); the aravis tests will be skipped"; \
+	fi
+	@if $(PY) -m pip install -q -e '.[$(EXTRAS),$(DRIVER_EXTRAS)]'; then touch $(DRIVERS); \
+	else echo "warning: the [$(DRIVER_EXTRAS)] extras did not install; their tests will be skipped"; fi
+
+test: $(STAMP) $(DRIVERS)
 	$(PY) -m pytest
 
 bench: $(STAMP)

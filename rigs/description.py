@@ -7,9 +7,10 @@ Format (version 1)::
     name: simulated
     frame_rate: 60.0                  # Hz, the trigger rate
     trigger:
-      mode: software                  # software | hardware | free-run
+      mode: software                  # software | hardware | free-run | action
       line: Line0                     # hardware trigger input (mode: hardware)
       selector: FrameStart
+      action: {device_key: 1, group_key: 1, group_mask: 1}   # mode: action (GigE Vision)
     sync:
       ptp: true                       # cameras' clocks are IEEE 1588 synchronised
       tolerance_ms: 2.0               # max timestamp spread of one instant (SyncGroup)
@@ -21,15 +22,17 @@ Format (version 1)::
       pixel_format: RGB8
     cameras:
       cam0:
-        backend: simulated            # simulated | replay | (later) genicam, aravis
+        backend: simulated            # simulated | replay | genicam | aravis
         device: {id: sim0}            # id / serial / address, whichever the backend uses
-        pixel_format: RGB8            # RGB8 | Mono8 | RGB16 | Mono16
+        pixel_format: RGB8            # RGB8 | Mono8 | RGB16 | Mono16; GenICam backends: any
+                                      # format of rigs.pixelformats (BayerRG8, Mono12p, ...)
         width: 656
         height: 490
         exposure: 10000               # µs (GenICam ExposureTime)
         gain: 0.0                     # dB (GenICam Gain)
         # any other key is a backend option (simulated: source, jitter_ms, drop_probability,
-        # drop_frames, duplicate_frames, realtime, loop, seed; replay: session, realtime, loop)
+        # drop_frames, duplicate_frames, realtime, loop, seed; replay: session, realtime, loop;
+        # genicam/aravis: buffers, timeout, debayer, chunks, nodes, ... — rigs/backends/_genapi.py)
 
 Relative paths (``calibration``, and the backend options ``source`` and ``session``) are
 resolved against the folder of the YAML file. Errors name the file and the field.
@@ -47,12 +50,15 @@ from typing import Any
 import yaml
 
 from rigs.device import PIXEL_FORMATS, RigError
+from rigs.pixelformats import SENSOR_FORMATS
 
 __all__ = ["CameraConfig", "RigDescription", "SyncConfig", "TriggerConfig"]
 
 FORMAT = "studio.rig"
 VERSION = 1
-TRIGGER_MODES = ("software", "hardware", "free-run")
+TRIGGER_MODES = ("software", "hardware", "free-run", "action")
+#: the action-command keys of ``trigger: {mode: action}`` (GigE Vision: 32-bit each)
+ACTION_KEYS = ("device_key", "group_key", "group_mask")
 PATH_OPTIONS = ("source", "session")
 _TOP_KEYS = {
     "format", "version", "name", "frame_rate", "trigger", "sync", "calibration", "cameras",
@@ -63,19 +69,21 @@ _CAMERA_KEYS = {"backend", "device", "pixel_format", "width", "height", "exposur
 
 @dataclass(frozen=True)
 class TriggerConfig:
-    """How exposures are started: ``software`` (host timer), ``hardware`` (input ``line``), or
-    ``free-run`` (each camera's own clock)."""
+    """How exposures are started: ``software`` (host timer), ``hardware`` (input ``line``),
+    ``free-run`` (each camera's own clock) or ``action`` (GigE Vision action commands, one
+    per tick for the whole rig, matched by the ``action`` keys)."""
 
     mode: str = "software"
     line: str | None = None
     selector: str = "FrameStart"
+    action: dict[str, int] | None = None
 
     @property
     def genicam(self) -> dict[str, str]:
         """The GenICam trigger features this mode maps to."""
         if self.mode == "free-run":
             return {"TriggerMode": "Off"}
-        source = "Software" if self.mode == "software" else self.line
+        source = {"software": "Software", "action": "Action1"}.get(self.mode, self.line)
         return {"TriggerMode": "On", "TriggerSelector": self.selector, "TriggerSource": source}
 
 
@@ -290,7 +298,14 @@ class RigDescription:
         selector = t.get("selector", "FrameStart")
         if selector != "FrameStart":
             raise _err(where, "trigger.selector", f"only 'FrameStart' is supported, got {selector!r}")
-        return TriggerConfig(mode, line, selector)
+        action = None
+        if mode == "action":
+            a = t.get("action") or {}
+            if not isinstance(a, Mapping) or set(a) - set(ACTION_KEYS):
+                raise _err(where, "trigger.action", f"expected a mapping of {list(ACTION_KEYS)}, got {a!r}")
+            action = {k: int(_number(where, f"trigger.action.{k}", a.get(k, 1), positive=False, low=0,
+                                     high=0xFFFFFFFF, integer=True)) for k in ACTION_KEYS}  # fmt: skip
+        return TriggerConfig(mode, line, selector, action)
 
     @staticmethod
     def _sync(where: str, s: Any) -> SyncConfig:
@@ -321,8 +336,8 @@ class RigDescription:
         if not isinstance(device, Mapping):
             raise _err(where, f"{at}.device", f"expected a mapping (id/serial/address), got {device!r}")
         pf = c.get("pixel_format", "RGB8")
-        if pf not in PIXEL_FORMATS:
-            raise _err(where, f"{at}.pixel_format", f"expected one of {list(PIXEL_FORMATS)}, got {pf!r}")
+        if pf not in PIXEL_FORMATS and pf not in SENSOR_FORMATS:
+            raise _err(where, f"{at}.pixel_format", f"expected one of {list(dict.fromkeys([*PIXEL_FORMATS, *SENSOR_FORMATS]))}, got {pf!r}")
         size = {}
         for key in ("width", "height"):
             v = c.get(key)

@@ -1,6 +1,6 @@
 """The camera interface every backend implements, and the frame it delivers.
 
-A backend (``simulated``, ``replay``; later ``genicam`` through harvesters and ``aravis``)
+A backend (``simulated``, ``replay``, ``genicam`` through harvesters, ``aravis``)
 subclasses :class:`CameraDevice` and fills in five hooks (``_apply``, ``_start``, ``_stop``,
 ``_next``, ``_close``). Features use GenICam standard names (SFNC) so that a GenTL camera's
 node map can be driven with the same calls:
@@ -10,20 +10,24 @@ feature                  meaning                                     type / unit
 =======================  ==========================================  ================
 ``Width``, ``Height``    region of interest size                     int, pixels
 ``OffsetX``, ``OffsetY`` region of interest origin                   int, pixels
-``PixelFormat``          ``RGB8``, ``Mono8``, ``RGB16``, ``Mono16``  str
+``PixelFormat``          ``RGB8``, ``Mono8``, ``RGB16``, ``Mono16``  str (GenICam backends:
+                                                                     any PFNC name of
+                                                                     :mod:`rigs.pixelformats`)
 ``ExposureTime``         exposure                                    float, µs
 ``Gain``                 analogue gain                               float, dB
 ``AcquisitionFrameRate`` frame (trigger) rate                        float, Hz
 ``TriggerMode``          ``On`` (triggered) / ``Off`` (free-run)      str
-``TriggerSource``        ``Software``, ``Line0`` .. ``Line3``         str
+``TriggerSource``        ``Software``, ``Line0`` .. ``Line3``,        str
+                         ``Action0``, ``Action1``
 ``TriggerSelector``      ``FrameStart``                              str
 ``GevIEEE1588``          PTP (IEEE 1588) clock synchronisation       bool
 =======================  ==========================================  ================
 
 Frames are leased, as harvesters' buffers are: ``with camera.fetch(timeout=1.0) as frame:``
 returns the buffer to the driver when the block exits. Copy ``frame.image`` to keep it
-beyond the block (the simulated and replay backends hand out fresh arrays, a GenTL backend
-will not).
+beyond the block (the simulated and replay backends hand out fresh arrays; a backend that
+lends driver memory sets ``buffers_reused``; the GenICam backends convert every buffer into a
+fresh array and return the buffer at once).
 """
 
 from __future__ import annotations
@@ -74,7 +78,7 @@ PIXEL_FORMATS: dict[str, tuple[int, type]] = {
     "RGB16": (3, np.uint16),
 }
 
-_TRIGGER_SOURCES = ("Software", "Line0", "Line1", "Line2", "Line3", "Action0")
+_TRIGGER_SOURCES = ("Software", "Line0", "Line1", "Line2", "Line3", "Action0", "Action1")
 
 #: GenICam feature name -> (python type, allowed values or None)
 FEATURES: dict[str, tuple[type, tuple | None]] = {
@@ -176,13 +180,14 @@ class FrameQueue:
         return self._q.qsize()
 
 
-def _coerce_feature(camera: str, name: str, value: Any) -> Any:
-    if name not in FEATURES:
+def _coerce_feature(camera: str, name: str, value: Any, rules: dict | None = None) -> Any:
+    rules = FEATURES if rules is None else rules
+    if name not in rules:
         raise RigError(
             f"camera {camera!r}: unknown feature {name!r}; known GenICam features: "
-            f"{', '.join(sorted(FEATURES))}"
+            f"{', '.join(sorted(rules))}"
         )
-    kind, allowed = FEATURES[name]
+    kind, allowed = rules[name]
     try:
         if kind is bool:
             if not isinstance(value, (bool, np.bool_)):
@@ -227,6 +232,8 @@ class CameraDevice(abc.ABC):
     """
 
     backend = "abstract"
+    #: the features this backend takes: name -> (type, allowed values or None)
+    feature_rules: dict[str, tuple[type, tuple | None]] = FEATURES
     #: True when a frame's image memory goes back to the driver at the end of the lease
     #: (GenTL buffers); consumers that keep frames must then copy them.
     buffers_reused = False
@@ -256,7 +263,8 @@ class CameraDevice(abc.ABC):
         self._delivered = 0
         if features:
             self._features.update(
-                {k: _coerce_feature(self.name, k, v) for k, v in features.items() if v is not None}
+                {k: _coerce_feature(self.name, k, v, self.feature_rules) for k, v in features.items()
+                 if v is not None}
             )
 
     # -- features ---------------------------------------------------------------------
@@ -267,7 +275,7 @@ class CameraDevice(abc.ABC):
         wrong type or value, or a size/format change while streaming.
         """
         self._check_open()
-        coerced = {k: _coerce_feature(self.name, k, v) for k, v in features.items()}
+        coerced = {k: _coerce_feature(self.name, k, v, self.feature_rules) for k, v in features.items()}
         if self._streaming:
             locked = sorted(set(coerced) & LOCKED_WHILE_STREAMING)
             if locked:
@@ -281,7 +289,7 @@ class CameraDevice(abc.ABC):
 
     def get(self, feature: str) -> Any:
         """Current value of a GenICam feature."""
-        if feature not in FEATURES:
+        if feature not in self.feature_rules:
             raise RigError(f"camera {self.name!r}: unknown feature {feature!r}")
         if feature not in self._features:
             raise RigError(f"camera {self.name!r}: feature {feature} is not set yet")
@@ -335,6 +343,11 @@ class CameraDevice(abc.ABC):
     def calibration_source(self):
         """A calibration file the source provides (simulated/replay session), else None."""
         return None
+
+    def device_stats(self) -> dict[str, Any]:
+        """The driver's own counters (a GenTL/Aravis stream's completed buffers, failures,
+        underruns, resent packets, ...) as a JSON-serialisable dict; empty for playback."""
+        return {}
 
     @property
     def stats(self) -> CameraStats:

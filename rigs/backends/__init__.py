@@ -3,19 +3,12 @@
 A backend is a factory ``open_camera(config, description, *, epoch_ns, shared) -> CameraDevice``
 (``config`` a :class:`rigs.description.CameraConfig`; ``epoch_ns`` the rig's common clock
 origin; ``shared`` a dict the cameras of one :meth:`rigs.Rig.open` call share, e.g. to open a
-GenTL producer or a session folder once). Built-in: ``simulated`` and ``replay``. The GenICam
-backends (``genicam`` through harvesters and any GenTL producer, ``aravis`` through PyGObject)
-plug in here with :func:`register_backend` — or by adding their ``"module:function"`` entry.
-
-How a GenICam backend maps onto :class:`~rigs.CameraDevice` (harvesters 1.4 names):
-``device: {serial: ...}`` → ``Harvester.create({"serial_number": ...})`` (one ``Harvester``
-per rig, kept in ``shared``); ``_apply`` writes the SFNC features (``Width``, ``Height``,
-``PixelFormat``, ``ExposureTime``, ``Gain``, ``AcquisitionFrameRate``, ``TriggerSelector`` /
-``TriggerMode`` / ``TriggerSource``, ``GevIEEE1588``) to ``remote_device.node_map``;
-``_start``/``_stop`` → ``start()``/``stop()`` acquisition; ``_next(timeout)`` → ``fetch(timeout=...)``
-with ``timestamp_ns`` from the buffer (PTP time when ``GevIEEE1588`` is on) and ``frame_id``
-from the GenTL block id; ``_release`` → ``buffer.queue()``; ``buffers_reused = True`` so the
-rig copies images it keeps; ``_close`` → ``destroy()``. No signal handlers are installed.
+GenTL producer or a session folder once). Built-in: ``simulated`` and ``replay`` (playback
+of stored frames), ``genicam`` (harvesters and any GenTL producer, :mod:`rigs.backends.genicam`)
+and ``aravis`` (Aravis 0.8 through PyGObject, :mod:`rigs.backends.aravis`); both GenICam
+backends share :mod:`rigs.backends._genapi` (GenApi node writes with checked values,
+buffers, timestamps, frame ids, software-trigger fan-out). Others plug in with
+:func:`register_backend` or a ``"module:function"`` entry. No backend installs signal handlers.
 """
 
 from __future__ import annotations
@@ -30,11 +23,8 @@ __all__ = ["available_backends", "create_camera", "register_backend"]
 _BACKENDS: dict[str, str | Callable[..., CameraDevice]] = {
     "simulated": "rigs.backends.simulated:open_camera",
     "replay": "rigs.backends.replay:open_camera",
-}
-
-_PLANNED = {
-    "genicam": "GenICam cameras through harvesters and a GenTL producer",
-    "aravis": "GenICam cameras through Aravis (PyGObject)",
+    "genicam": "rigs.backends.genicam:open_camera",
+    "aravis": "rigs.backends.aravis:open_camera",
 }
 
 
@@ -52,9 +42,6 @@ def available_backends() -> list[str]:
 def _factory(name: str) -> Callable[..., CameraDevice]:
     entry = _BACKENDS.get(name)
     if entry is None:
-        if name in _PLANNED:
-            raise RigError(f"camera backend {name!r} ({_PLANNED[name]}) is not implemented yet; "
-                           f"available: {available_backends()}")  # fmt: skip
         raise RigError(f"unknown camera backend {name!r}; available: {available_backends()}")
     if isinstance(entry, str):
         module, _, attr = entry.partition(":")

@@ -2,6 +2,10 @@
 
 from __future__ import annotations
 
+import os
+import signal
+import subprocess
+import time
 from pathlib import Path
 
 import numpy as np
@@ -68,3 +72,25 @@ def rig_dict(source: Path | None, cameras=CAMERAS, **camera_options) -> dict:
         "defaults": defaults,
         "cameras": {cam: {"device": {"id": f"sim{k}"}} for k, cam in enumerate(cameras)},
     }
+
+
+def kill_after_rows(cmd: list[str], session: Path, rows: int, timeout: float = 30.0) -> int:
+    """Run ``cmd`` (a recording into ``session``) and SIGKILL it once ``frames.csv`` holds
+    ``rows`` rows; returns the rows seen. Fails if the child exits or stalls first."""
+    child = subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
+    try:
+        deadline, seen = time.monotonic() + timeout, 0
+        while time.monotonic() < deadline and child.poll() is None and seen < rows:
+            try:
+                seen = (session / "frames.csv").read_text().count("\n") - 1
+            except OSError:
+                seen = 0
+            time.sleep(0.01)
+        assert child.poll() is None, child.stderr.read().decode()
+        assert seen >= rows, f"only {seen} rows after {timeout:g} s"
+        os.kill(child.pid, signal.SIGKILL)
+    finally:
+        child.kill()
+        child.wait(10)
+        child.stderr.close()
+    return seen

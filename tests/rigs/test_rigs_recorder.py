@@ -5,9 +5,6 @@ from __future__ import annotations
 
 import errno
 import json
-import os
-import signal
-import subprocess
 import sys
 import threading
 import time
@@ -16,7 +13,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 import yaml
-from rigkit import CAMERAS, make_source, rig_dict, source_image
+from rigkit import CAMERAS, kill_after_rows, make_source, rig_dict, source_image
 
 from rigs import Frame, MultiFrame, Recorder, RecorderStats, Rig, RigError, Session, SessionWriter
 
@@ -185,26 +182,7 @@ def test_recorder_errors():
 
 def test_recorder_survives_sigkill_mid_capture(tmp_path, source):
     out = tmp_path / "killed"
-    child = subprocess.Popen([sys.executable, str(HERE / "rigrec_kill_child.py"), str(source), str(out)],
-                             stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)  # fmt: skip
-    try:
-        deadline = time.monotonic() + 30
-        rows = 0
-        while time.monotonic() < deadline and child.poll() is None:
-            try:
-                rows = (out / "frames.csv").read_text().count("\n") - 1
-            except OSError:
-                rows = 0
-            if rows >= 8:
-                break
-            time.sleep(0.02)
-        assert child.poll() is None, child.stderr.read().decode()
-        assert rows >= 8
-        os.kill(child.pid, signal.SIGKILL)
-    finally:
-        child.kill()
-        child.wait(10)
-        child.stderr.close()
+    kill_after_rows([sys.executable, str(HERE / "rigrec_kill_child.py"), str(source), str(out)], out, 8)
     s = Session.open(out)
     assert s.status == "recording"  # never closed
     n = len(s.frame_indices)

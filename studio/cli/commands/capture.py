@@ -124,7 +124,8 @@ def run(args: argparse.Namespace) -> int:
                     _record_background(rig, writer, args.background, console)
                 t_start = time.monotonic()
                 _record(rig, recorder, args.frames, console)
-                writer.record_drops(_drops(rig.stats, recorder.stats))
+                streams = {n: c.device_stats() for n, c in rig.cameras.items()}
+                writer.record_drops(_drops(rig.stats, recorder.stats, streams))
                 recorder.close()
                 elapsed = time.monotonic() - t_start
         except (RigError, SessionError) as exc:  # disk full, a camera failure, ...: one clear line
@@ -173,16 +174,22 @@ def _record_background(rig, writer, n: int, console) -> None:
             writer.write_background(cam, i, image)
 
 
-def _drops(rig_stats, rstats) -> dict:
-    """The capture's losses as the session records them (``session info`` shows the same)."""
+def _drops(rig_stats, rstats, streams: dict | None = None) -> dict:
+    """The capture's losses as the session records them (``session info`` shows the same);
+    ``streams`` holds each camera's driver counters (:meth:`rigs.CameraDevice.device_stats`:
+    an Aravis stream's completed buffers, failures, underruns, ...), kept when not empty."""
     sync = rig_stats.sync
-    return {
+    out = {
         "incomplete_instants": int(sync.incomplete),
         "recorder_dropped": int(rstats.dropped),
         "cameras": {n: {"dropped": int(sync.dropped[n]), "late": int(sync.late[n]),
                         "duplicates": int(sync.duplicates[n]), "mismatched": int(sync.mismatched[n]),
                         "queue_dropped": int(c.queue_dropped)} for n, c in rig_stats.cameras.items()},
     }
+    streams = {n: s for n, s in (streams or {}).items() if s}
+    if streams:
+        out["streams"] = streams
+    return out
 
 
 def _summary(out, names, rstats, rig_stats, elapsed: float) -> None:

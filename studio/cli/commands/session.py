@@ -134,6 +134,8 @@ def _info(args: argparse.Namespace) -> int:
                                 f"queue {d['queue_dropped']}" for c, d in drops.get("cameras", {}).items())
             print(f"drops     {drops.get('incomplete_instants', 0)} incomplete trigger instant(s) not in frames.csv; "
                   f"recorder dropped {drops.get('recorder_dropped', 0)}; {per_cam}")
+            for cam, counters in (drops.get("streams") or {}).items():
+                print(f"stream    {cam}: " + ", ".join(f"{k} {v}" for k, v in counters.items()))
         for index, reason in session.gaps[:MAX_LISTED]:
             print(f"  {index}: {reason}")
         if len(session.gaps) > MAX_LISTED:

@@ -241,12 +241,17 @@ def load_fits(source, frames: list[int] | None = None) -> dict[int, FrameFit]:
         raise FitError(f"{lay.root}: no fit/ folder — run `studio fit {lay.source}` first")
     if frames is None and lay.fit_sequence.is_file():
         frames = json.loads(lay.fit_sequence.read_text()).get("frames")
-    out = {}
+    out, refused = {}, {}
     for p in sorted(root.glob("[0-9]*.json")):
         if frames is None or int(p.stem) in frames:
             obj = json.loads(p.read_text())
             if obj.get("fitted", True):  # frames the quality gates refused carry no body
                 out[int(p.stem)] = FrameFit.from_json(obj)
+            elif obj.get("quality"):
+                refused[int(p.stem)] = obj["quality"]
+    if not out and refused:
+        raise FitError(f"{root}: no body to report — the quality gates refused every frame "
+                       f"({summary_line(refused)}); see fit/NNNNNN.json for every reason")
     if not out:
         raise FitError(f"{root}: no fitted frames — run `studio fit {lay.source}` first")
     return out

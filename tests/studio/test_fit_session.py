@@ -208,3 +208,22 @@ def test_report_escapes_hostile_names(tmp_path):
     assert rows[0].startswith("name,unit,mean,std,status,flags,truth,error") and len(rows) > 5
     table = json.loads((hostile / "report" / "measurements.json").read_text())["measurements"]
     assert 1000 < table["stature"]["mean"] < 2200 and table["stature"]["truth"] is None
+
+
+def test_every_frame_refused_says_why_not_run_fit(tmp_path):
+    """A session whose every frame the quality gates refused has results, but no body: loading
+    them names the refused frames and their first reason instead of asking for a fit."""
+    from studio.fit.errors import UnusableFrame
+    from studio.fit.output import write_unfitted
+    from studio.workspace import Layout
+
+    lay = Layout(tmp_path)
+    for f, msg in ((3, "2 disconnected blobs in the silhouette"), (5, "the mask covers 97% of the image")):
+        quality = {"status": "failed", "reasons": [{"check": "blobs", "severity": "failed", "view": "cam1",
+                                                    "message": msg}]}
+        write_unfitted(lay, UnusableFrame(f, quality))
+    with pytest.raises(FitError, match=r"refused every frame \(2 failed — frame 3 failed: cam1: 2 disconnected "
+                                       r"blobs in the silhouette; frame 5 failed: cam1: the mask covers 97%"):
+        load_fits(tmp_path)
+    with pytest.raises(FitError, match="no fitted frames — run `studio fit"):
+        load_fits(tmp_path, frames=[4])

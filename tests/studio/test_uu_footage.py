@@ -144,3 +144,14 @@ def test_import_and_segment_the_person(uu, calibrated, capsys):
     for n, lab in labels.items():
         person = float(np.mean(lab == 1))
         assert 0.01 < person < 0.2, (n, person)  # a seated person, not the empty room nor the whole image
+    # fit and report run to the end on the real recording and say what they cannot vouch for: with
+    # the chair and the segmentation's clutter the frame is refused with its reasons, never a body
+    code = main(["fit", str(session), "--frames", "1", "--gender", "female"])
+    err = capsys.readouterr().err
+    assert code == 1 and "no frame passed the segmentation checks" in err and "frame 1 failed" in err, err
+    result = json.loads((session / "fit" / "000001.json").read_text())
+    assert result["fitted"] is False and result["quality"]["status"] == "failed"
+    assert any("disconnected blobs" in r["message"] for r in result["quality"]["reasons"])
+    assert main(["report", str(session)]) == 1  # nothing to measure, and it says why, not "run fit first"
+    err = capsys.readouterr().err
+    assert "quality gates refused every frame" in err and "frame 1 failed: cam1: 2 disconnected blobs" in err, err

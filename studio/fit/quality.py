@@ -101,31 +101,46 @@ def status_of(reasons) -> str:
 
 
 # --------------------------------------------------------------------------- population
-def summarise_ansur(folder: str | Path) -> dict:
-    """Summary statistics (SI units) of ANSUR II's public CSVs in ``folder``, per sex:
-    ``{"female"|"male": {name: {"n", "mean", "std", "p01", "p99", "min", "max"}}}``."""
+def read_ansur(folder: str | Path, columns: dict[str, tuple[str, float]]) -> dict[str, dict[str, np.ndarray]]:
+    """Per sex, ``{name: values (SI units)}`` of ANSUR II's public CSVs in ``folder``
+    (``ANSUR_II_{FEMALE,MALE}_Public.csv``) for ``columns`` {name: (CSV column, factor to SI)};
+    a missing file, column or number is named in the error."""
     import csv
 
     folder = Path(folder)
-    out = {"format": "studio.population", "version": 1,
-           "source": "ANSUR II public release (US Army 2012), ANSUR_II_{FEMALE,MALE}_Public.csv", "sexes": {}}
+    out = {}
     for sex in ("female", "male"):
         path = folder / f"ANSUR_II_{sex.upper()}_Public.csv"
         if not path.is_file():
             raise FileNotFoundError(f"{path}: ANSUR II CSV not found")
         with path.open(newline="", encoding="latin-1") as fh:
             rows = list(csv.DictReader(fh))
-        stats = {}
-        for name, (column, factor) in ANSUR_COLUMNS.items():
+        cols = {}
+        for name, (column, factor) in columns.items():
             try:
-                v = np.array([float(r[column]) for r in rows]) * factor
+                cols[name] = np.array([float(r[column]) for r in rows]) * factor
             except KeyError:
                 raise ValueError(f"{path}: no column {column!r}") from None
-            stats[name] = {"n": int(len(v)), "mean": float(v.mean()), "std": float(v.std(ddof=1)),
-                           "p01": float(np.percentile(v, 1)), "p99": float(np.percentile(v, 99)),
-                           "min": float(v.min()), "max": float(v.max())}
-        out["sexes"][sex] = stats
+            except ValueError as exc:
+                raise ValueError(f"{path}: column {column!r}: {exc}") from None
+        out[sex] = cols
     return out
+
+
+#: Where :func:`read_ansur` read its figures from.
+ANSUR_SOURCE = "ANSUR II public release (US Army 2012), ANSUR_II_{FEMALE,MALE}_Public.csv"
+
+
+def summarise_ansur(folder: str | Path) -> dict:
+    """Summary statistics (SI units) of ANSUR II's public CSVs in ``folder``, per sex:
+    ``{"female"|"male": {name: {"n", "mean", "std", "p01", "p99", "min", "max"}}}``."""
+    sexes = {
+        sex: {name: {"n": int(len(v)), "mean": float(v.mean()), "std": float(v.std(ddof=1)),
+                     "p01": float(np.percentile(v, 1)), "p99": float(np.percentile(v, 99)),
+                     "min": float(v.min()), "max": float(v.max())} for name, v in cols.items()}
+        for sex, cols in read_ansur(folder, ANSUR_COLUMNS).items()
+    }
+    return {"format": "studio.population", "version": 1, "source": ANSUR_SOURCE, "sexes": sexes}
 
 
 @lru_cache(maxsize=1)

@@ -34,25 +34,11 @@ def _columns() -> dict[str, tuple[str, float]]:
 
 def summarise_percentiles(folder: str | Path) -> dict:
     """The summary (module doc) from ANSUR II's public CSVs in ``folder``."""
-    import csv
+    from studio.fit.quality import ANSUR_SOURCE, read_ansur
 
-    folder = Path(folder)
     out = {"format": "studio.population-percentiles", "version": 1, "levels": _LEVELS.tolist(),
-           "source": "ANSUR II public release (US Army 2012), ANSUR_II_{FEMALE,MALE}_Public.csv", "sexes": {}}
-    for sex in ("female", "male"):
-        path = folder / f"ANSUR_II_{sex.upper()}_Public.csv"
-        if not path.is_file():
-            raise FileNotFoundError(f"{path}: ANSUR II CSV not found")
-        with path.open(newline="", encoding="latin-1") as fh:
-            rows = list(csv.DictReader(fh))
-        cols = {}
-        for name, (column, factor) in _columns().items():
-            try:
-                cols[name] = np.array([float(r[column]) for r in rows]) * factor
-            except KeyError:
-                raise ValueError(f"{path}: no column {column!r}") from None
-            except ValueError as exc:
-                raise ValueError(f"{path}: column {column!r}: {exc}") from None
+           "source": ANSUR_SOURCE, "sexes": {}}
+    for sex, cols in read_ansur(folder, _columns()).items():
         cols["bmi"] = cols["mass"] / cols["stature"] ** 2
         out["sexes"][sex] = {
             name: {"n": int(len(v)), "mean": round(float(v.mean()), 6), "std": round(float(v.std(ddof=1)), 6),

@@ -17,7 +17,7 @@ import sys
 from studio import __version__
 from studio.cli import commands
 
-__all__ = ["main", "build_parser", "CommandError", "open_workspace"]
+__all__ = ["main", "build_parser", "CommandError", "name_path_pairs", "open_workspace"]
 
 
 class CommandError(RuntimeError):
@@ -26,6 +26,23 @@ class CommandError(RuntimeError):
     def __init__(self, message: str, code: int = 1):
         super().__init__(message)
         self.code = code
+
+
+def name_path_pairs(specs, what: str) -> dict:
+    """``NAME=PATH`` command-line items → ``{camera name: Path}`` in the given order; an item
+    without both parts or a camera named twice is a :class:`CommandError` (``what`` says which
+    items were expected)."""
+    from pathlib import Path
+
+    out = {}
+    for spec in specs:
+        name, sep, path = spec.partition("=")
+        if not sep or not name or not path:
+            raise CommandError(f"{spec}: expected NAME=FILE {what}")
+        if name in out:
+            raise CommandError(f"{spec}: camera {name!r} is given twice")
+        out[name] = Path(path)
+    return out
 
 
 def open_workspace(path, *, out=None):

@@ -56,12 +56,13 @@ class Support:
                           for n, m, e in zip(names, self.ignore, self.evidence, strict=True)}}
 
 
-def seat_of(vertices: np.ndarray, parts: np.ndarray) -> tuple[float, float, float]:
-    """(x, y, height) of the seat of a body: under the pelvis part's centroid, at the lowest
-    vertex within ``SEAT_RADIUS`` of it."""
+def seat_of(vertices: np.ndarray, parts: np.ndarray, radius: float = SEAT_RADIUS) -> tuple[float, float, float]:
+    """(x, y, height) of the seat of a body (``parts``: part index per vertex): under the pelvis
+    part's centroid, at the lowest vertex within ``radius`` of it. The simulator puts its stool's
+    top there too (:mod:`studio.simulate.props`)."""
     V = np.asarray(vertices, dtype=np.float64)
     x, y = V[parts == PART_NAMES.index("pelvis"), :2].mean(axis=0)
-    near = np.hypot(V[:, 0] - x, V[:, 1] - y) <= SEAT_RADIUS
+    near = np.hypot(V[:, 0] - x, V[:, 1] - y) <= radius
     return float(x), float(y), float(V[near, 2].min())
 
 

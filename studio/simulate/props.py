@@ -3,7 +3,7 @@
 A lab records seated postures on a stool that is not in the empty-scene frames, so the
 segmentation sees it as foreground: the stool is part of the observed silhouette while the
 truth labels keep it apart (label 3, "object"). The stool is placed where the seated body
-rests (:func:`stool_under`) and drawn as three closed, outward-wound cylinders: a seat, a
+rests (:func:`studio.fit.props.seat_of` with the stool's radius) and drawn as three closed, outward-wound cylinders: a seat, a
 column and a base (:func:`stool_mesh`).
 """
 
@@ -13,7 +13,7 @@ import numpy as np
 
 from studio.render.solids import cylinder_mesh
 
-__all__ = ["STOOL_RADIUS", "stool_mesh", "stool_under"]
+__all__ = ["STOOL_RADIUS", "stool_mesh"]
 
 #: Radius of the stool's seat (m).
 STOOL_RADIUS = 0.17
@@ -32,12 +32,3 @@ def stool_mesh(x: float, y: float, top: float, radius: float = STOOL_RADIUS,
     F = np.concatenate([p[1] + o for p, o in zip(parts, offsets, strict=True)])
     return V, F.astype(np.int32)
 
-
-def stool_under(vertices: np.ndarray, parts: np.ndarray, pelvis: int,
-                radius: float = STOOL_RADIUS) -> tuple[float, float, float]:
-    """(x, y, top) of a stool the body of ``vertices`` (V, 3) sits on: centred under the pelvis
-    part's vertices, its top touching the lowest point of the body within the seat's radius."""
-    V = np.asarray(vertices, dtype=np.float64)
-    x, y = V[parts == pelvis, :2].mean(axis=0)
-    near = np.hypot(V[:, 0] - x, V[:, 1] - y) <= radius
-    return float(x), float(y), float(V[near, 2].min())

@@ -43,7 +43,8 @@ from calibration.rotation import matrix_to_rotvec, rotvec_to_matrix
 from rigs.atomic import atomic_open
 from studio.body.anny_adapter import bone_part
 from studio.body.skeleton import PART_NAMES
-from studio.simulate.props import STOOL_RADIUS, stool_under
+from studio.fit.props import seat_of
+from studio.simulate.props import STOOL_RADIUS
 
 __all__ = ["LAB_POSES", "SEQUENCES", "build_truth", "lab_pose", "straight_t_pose", "PART_NAMES", "QUANT_SCALE"]
 
@@ -390,7 +391,7 @@ def build_truth(out_dir: str | Path, names: list[str] | None = None, progress=No
             root[i, 2] = -V[i][:, 2].min()
             world[i] = Wi
             if pose_names[i] in SEATED_FAMILIES:
-                props[i] = (*stool_under(Wi, parts, PART_NAMES.index("pelvis")), STOOL_RADIUS)
+                props[i] = (*seat_of(Wi, parts, STOOL_RADIUS), STOOL_RADIUS)
         pose_bones = sorted({k for p in poses for k in p})
         rotvecs = np.array([[p.get(b, np.zeros(3)) for b in pose_bones] for p in poses],
                            dtype=np.float32).reshape(n, len(pose_bones), 3)

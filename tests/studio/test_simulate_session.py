@@ -275,7 +275,8 @@ def test_two_lights_penumbra_and_loose_clothing(tmp_path):
 def test_stool_geometry_and_placement():
     """The stool is three closed, outward-wound cylinders (volume by the divergence theorem =
     the analytic volume) and sits under the body, touching its lowest point over the seat."""
-    from studio.simulate.props import stool_mesh, stool_under
+    from studio.fit.props import seat_of
+    from studio.simulate.props import stool_mesh
 
     V, F = stool_mesh(0.3, -0.2, 0.47, 0.17, sides=64)
     a, b, c = V[F[:, 0]], V[F[:, 1]], V[F[:, 2]]
@@ -289,7 +290,7 @@ def test_stool_geometry_and_placement():
     # a body: pelvis blob centred at (0.1, 0.2), its lowest point within the seat at 0.45 m
     body = np.array([[0.1, 0.2, 0.50], [0.1, 0.3, 0.45], [0.1, 0.2, 0.9], [0.9, 0.9, 0.0]])
     parts = np.array([0, 0, 1, 2])
-    x, y, top = stool_under(body, parts, pelvis=0)
+    x, y, top = seat_of(body, parts, radius=0.17)
     assert (x, y) == pytest.approx((0.1, 0.25)) and top == pytest.approx(0.45)
 
 

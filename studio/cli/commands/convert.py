@@ -107,7 +107,7 @@ def _load(args):
     from pathlib import Path
 
     from calibration import RigCalibration
-    from studio.cli import CommandError
+    from studio.cli import CommandError, name_path_pairs
 
     inputs = args.inputs
     if len(inputs) == 1 and ("=" not in inputs[0] or Path(inputs[0]).exists()):
@@ -115,16 +115,10 @@ def _load(args):
         if not src.exists():
             raise CommandError(f"{src}: no such file or folder")
         return RigCalibration.load_any(src, args.from_, units=args.units, z_down=args.z_down), src
-    pairs = {}
-    for item in inputs:
-        name, sep, file = item.partition("=")
-        if not sep or not name or not file:
-            raise CommandError(f"{item}: expected NAME=FILE when several inputs are given")
-        if name in pairs:
-            raise CommandError(f"{item}: camera {name!r} given twice")
-        if not Path(file).is_file():
+    pairs = name_path_pairs(inputs, "when several inputs are given")
+    for name, file in pairs.items():
+        if not file.is_file():
             raise CommandError(f"{file}: no such file (camera {name!r})")
-        pairs[name] = Path(file)
     if args.from_ not in (None, "opencv_camera"):
         raise CommandError(f"NAME=FILE inputs are per-camera OpenCV files; --from {args.from_} does not apply")
     rig = RigCalibration.from_camera_files(pairs, units=args.units, z_down=args.z_down)

@@ -43,21 +43,6 @@ def register(subparsers) -> None:
     p.set_defaults(func=run)
 
 
-def _pairs(specs: list[str], option: str) -> list[tuple[str, Path]]:
-    from studio.cli import CommandError
-
-    out, seen = [], set()
-    for spec in specs:
-        name, sep, path = spec.partition("=")
-        if not sep or not name or not path:
-            raise CommandError(f"{option} {spec!r}: expected NAME=FILE (camera name, then its video or image folder)")
-        if name in seen:
-            raise CommandError(f"{option}: camera {name!r} is given twice")
-        seen.add(name)
-        out.append((name, Path(path)))
-    return out
-
-
 def _calibration(path: str, sizes: dict) -> dict:
     """The calibration as native JSON, checked against the cameras' names and image sizes."""
     from calibration import RigCalibration
@@ -80,13 +65,14 @@ def run(args: argparse.Namespace) -> int:
 
     from rigs.importer import check_sources, import_session, probe, time_spread_ms
     from rigs.session import SessionError
-    from studio.cli import CommandError
+    from studio.cli import CommandError, name_path_pairs
     from studio.workspace.frames import FrameSelectionError, select_frames
 
     if args.background_frames < 1:
         raise CommandError(f"--background-frames must be >= 1, got {args.background_frames}")
-    videos = _pairs(args.video, "--video")
-    backgrounds = _pairs(args.background, "--background")
+    what = "(camera name, then its video or image folder)"
+    videos = name_path_pairs(args.video, f"after --video {what}").items()
+    backgrounds = name_path_pairs(args.background, f"after --background {what}").items()
     unknown = [n for n, _ in backgrounds if n not in dict(videos)]
     if unknown:
         raise CommandError(f"--background names cameras {unknown} that have no --video")

@@ -65,9 +65,11 @@ def parse_scheduler(text: str | None) -> tuple[str, int | str] | None:
 
 def worker_setup(die_with_parent: bool = True) -> None:
     """What every worker process runs once: die with the parent (local processes), BLAS and
-    OpenCV on one thread (one worker per core; :mod:`studio.blas`)."""
+    OpenCV on one thread (one worker per core; :mod:`studio.blas`), freed image-sized blocks
+    kept for reuse (a Dask nanny's malloc setting undone; :mod:`studio.allocator`)."""
     import cv2
 
+    from studio.allocator import keep_large_blocks
     from studio.blas import limit_blas_threads
     from studio.workers import die_with_parent as tie
 
@@ -75,6 +77,7 @@ def worker_setup(die_with_parent: bool = True) -> None:
         tie()
     cv2.setNumThreads(1)
     limit_blas_threads()
+    keep_large_blocks()
 
 
 @dataclass

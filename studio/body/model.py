@@ -19,7 +19,7 @@ from pathlib import Path
 
 import numpy as np
 
-from studio.body import scape, skeleton
+from studio.body import posed, scape, skeleton
 from studio.body.skeleton import PART_NAMES, PART_PARENTS, POSE_SIZE
 from studio.body.storage import dequantize_blocks
 
@@ -90,31 +90,23 @@ class BodyModel:
         if self.pose_limits.shape != (POSE_SIZE, 2) or np.any(self.pose_limits[:, 0] > self.pose_limits[:, 1]):
             raise BodyModelError(f"pose_limits must be ({POSE_SIZE}, 2) with low <= high")
         self._edges = scape.triangle_edges(self.template, self.faces).astype(np.float32)  # (F, 3, 2)
-        bounds = np.searchsorted(self.face_parts, np.arange(16))
-        self._part_slices = [slice(int(bounds[p]), int(bounds[p + 1])) for p in range(15)]
         # planar ("structure of arrays") copies for fast evaluation: component-major, faces last
         K = self.D_basis.shape[0]
         self._Dm = np.ascontiguousarray(self.D_mean.reshape(F, 9).T).reshape(9 * F)
         self._Db = np.ascontiguousarray(self.D_basis.reshape(K, F, 9).transpose(0, 2, 1)).reshape(K, 9 * F)
-        self._w_rest = np.ascontiguousarray(self._edges.reshape(F, 6).T)  # (6, F): row 2j + k
-        # Q·v is linear in [ω_1..ω_15, 1] (eq. 3.16): a dense (46, 6F) map
-        if self.Q_coef is not None:
-            Cv = np.einsum("fkij,fjl->fkil", self.Q_coef.reshape(F, 7, 3, 3), self._edges.astype(np.float64))
-            W = np.zeros((46, 3, 2, F))
-            fi = np.arange(F)
-            for slot in range(2):
-                for c in range(3):
-                    np.add.at(W, (3 * self.joint_pairs[:, slot] + c, slice(None), slice(None), fi),
-                              Cv[:, 3 * slot + c])
-            W[45] = np.moveaxis(Cv[:, 6], 0, -1)
-            self._Qv = W.reshape(46, 6 * F).astype(np.float32)
-            self._w_rest = self._Qv[45].reshape(6, F)  # Q at the rest pose
+        # Q·v per triangle: linear in its two adjacent joints' rotation vectors and a 1 (eq. 3.16);
+        # a rigid model (or use_q=False) keeps only the constant term, the template's own edges
+        rigid = np.zeros((F, 7, 3, 2), np.float32)
+        rigid[:, 6] = self._edges
+        self._Q_rigid = rigid
+        self._Qc = rigid if self.Q_coef is None else posed.compact_q(self.Q_coef, self._edges)
+        self._w_rest = np.ascontiguousarray(np.moveaxis(self._Qc[:, 6], 0, -1))  # (3, 2, F): Q at the rest pose
         self._D_cache: tuple[bytes, np.ndarray] | None = None
         self._solver = scape.PoissonSolver(self.faces, V)
         self._pelvis_idx = np.nonzero(self.parts == _PELVIS)[0]
         # rest-pose meshes are linear in the shape coefficients: precompute the basis
         Dall = np.concatenate([self._Dm[None], self._Db]).astype(np.float64).reshape(K + 1, 3, 3, F)
-        w0 = self._w_rest.astype(np.float64).reshape(3, 2, F)
+        w0 = self._w_rest.astype(np.float64)
         E = np.einsum("bijf,jkf->bikf", Dall, w0)
         sol = self._solver.solve_planar(E)
         self._rest_mean = sol[0] - sol[0][self._pelvis_idx].mean(axis=0)
@@ -253,34 +245,12 @@ class BodyModel:
         return D
 
     def _posed_edges(self, shapes: np.ndarray, poses: np.ndarray, use_q: bool = True) -> np.ndarray:
-        """Target edges R·D·Q·v (eq. 3.11), planar (B, 3, 2, F) float32."""
-        B = len(shapes)
-        F = len(self.faces)
-        G = self.part_rotations(poses).astype(np.float32)  # (B, 15, 3, 3)
+        """Target edges R·D·Q·v (eq. 3.11), planar (B, 3, 2, F) float32 (:mod:`studio.body.posed`)."""
+        G = self.part_rotations(poses)  # (B, 15, 3, 3)
         D = self._shape_gradients(shapes)
-        if use_q and self.Q_coef is not None:
-            rv = skeleton.joint_rotvecs(G.astype(np.float64)).reshape(B, 45)
-            X = np.concatenate([rv, np.ones((B, 1))], axis=1).astype(np.float32)
-            w = (X @ self._Qv).reshape(B, 3, 2, F)
-        else:
-            w = np.broadcast_to(self._edges.reshape(F, 6).T.reshape(3, 2, F), (B, 3, 2, F))
-        # u = D·w, component by component
-        u = np.empty((B, 3, 2, F), np.float32)
-        for i in range(3):
-            for k in range(2):
-                o = u[:, i, k]
-                np.multiply(D[:, i, 0], w[:, 0, k], out=o)
-                o += D[:, i, 1] * w[:, 1, k]
-                o += D[:, i, 2] * w[:, 2, k]
-        # out = R_part·u, part by part (faces are grouped by part)
-        out = np.empty_like(u)
-        for p, sl in enumerate(self._part_slices):
-            if sl.start == sl.stop:
-                continue
-            R = G[:, p, :, :, None, None]  # (B, 3, 3, 1, 1)
-            up = u[:, :, :, sl]  # (B, 3, 2, n)
-            out[:, :, :, sl] = R[:, :, 0] * up[:, None, 0] + R[:, :, 1] * up[:, None, 1] + R[:, :, 2] * up[:, None, 2]
-        return out
+        rv = skeleton.joint_rotvecs(G).astype(np.float32)
+        return posed.posed_edges(rv, self._Qc if use_q else self._Q_rigid, self.joint_pairs, D,
+                                 G.astype(np.float32), self.face_parts)
 
     def _generate(self, shapes: np.ndarray, poses: np.ndarray, use_q: bool = True) -> np.ndarray:
         e = self._posed_edges(shapes, poses, use_q=use_q)

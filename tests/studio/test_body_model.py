@@ -234,3 +234,33 @@ def test_mesh_io_rejects_bad_arrays_and_formats(tmp_path):
     ascii_ply.write_bytes(b"ply\nformat ascii 1.0\nelement vertex 0\nelement face 0\nend_header\n")
     with pytest.raises(ValueError, match="binary little-endian"):
         read_ply(ascii_ply)
+
+
+def test_posed_edges_are_r_d_q_v_of_every_triangle(model):
+    """eq. 3.11 term by term in float64 for a handful of triangles of every part: Q from its
+    regression on the two adjacent joints' rotation vectors (eq. 3.16), D from the shape
+    basis (eq. 3.22), R the part's rotation — against the compiled kernel the fit uses."""
+    from studio.body import scape, skeleton
+
+    rng = np.random.default_rng(7)
+    S = model.sample_shapes(2, rng)
+    P = np.tile(model.default_pose(), (2, 1))
+    lim = model.pose_limits
+    P[:, 6:] = lim[6:, 0] + rng.uniform(0.2, 0.8, (2, 24)) * (lim[6:, 1] - lim[6:, 0])
+    got = model._posed_edges(S, P)  # (B, 3, 2, F)
+    G = model.part_rotations(P)
+    rv = skeleton.joint_rotvecs(G)
+    edges = scape.triangle_edges(model.template, model.faces)  # (F, 3, 2)
+    F = len(model.faces)
+    faces = np.concatenate([np.flatnonzero(model.face_parts == p)[:3] for p in range(15)])
+    for b in range(2):
+        D = (model.D_mean.astype(np.float64) + S[b] @ model.D_basis.astype(np.float64)).reshape(F, 3, 3)
+        for f in faces:
+            x = np.concatenate([rv[b, model.joint_pairs[f, 0]], rv[b, model.joint_pairs[f, 1]], [1.0]])
+            Q = (x @ model.Q_coef[f]).reshape(3, 3)
+            want = G[b, model.face_parts[f]] @ D[f] @ Q @ edges[f]
+            assert np.abs(got[b, :, :, f] - want).max() < 2e-5 * max(1.0, np.abs(want).max())
+    rigid = model._posed_edges(S[:1], P[:1], use_q=False)
+    f = faces[5]
+    want = G[0, model.face_parts[f]] @ (model.D_mean.astype(np.float64) + S[0] @ model.D_basis).reshape(F, 3, 3)[f] @ edges[f]
+    assert np.abs(rigid[0, :, :, f] - want).max() < 2e-5

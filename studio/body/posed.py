@@ -5,9 +5,9 @@ Each triangle's pose deformation Q depends on the rotations of the two joints ne
 map of those seven numbers — not of all 45 components of the pose. The NumPy path multiplied
 a dense (46, 6F) map (12.7 MB, 85 % zeros) read whole for every body; here each triangle reads
 only its own 42 coefficients, then applies its shape deformation D (eq. 3.22) and its part's
-rotation R in the same pass. Measured on the 5,746-vertex female model (2 cores, process
-time, one body as Nelder–Mead asks): 1.28 ms (NumPy) → see :mod:`benchmarks`-free figure in
-``tests/studio/test_body_model.py`` comparison; the results agree to float32 rounding.
+rotation R in the same pass. Measured on the 5,746-vertex female model (process time, one
+body as Nelder–Mead asks, same run): 1.28 ms with NumPy → 0.59 ms; a whole mesh 3.36 → 2.02
+ms. The fit's costs came out identical on walk frame 12 (40 poses, sum 908.33682565).
 """
 
 from __future__ import annotations

@@ -149,8 +149,10 @@ def _fit_one(job: dict) -> dict:
             "surface_mm": 1000 * surface_distance(V, model.faces, Vt, model.faces),
             "joint_mm": 1000 * joint_error(model, V, Vt)[0],
             "stature_error_mm": 1000 * (stature - truth["studio"]["stature"]),
-            "precision": prec, "recall": rec, "time_s": dt, "start_family": fit.costs.get("start_family"),
-            "cost": fit.costs["total"]}
+            "precision": prec, "recall": rec, "time_s": dt, "cpu_s": fit.timings.get("cpu"),
+            "start_family": fit.costs.get("start_family"), "cost": fit.costs["total"],
+            # what the quality gates saw, and the fitted body (to study the gates without refitting)
+            "quality": fit.quality, "shape": fit.shape.tolist(), "pose": fit.pose.tolist()}
 
 
 def run(args) -> int:

@@ -9,6 +9,9 @@ time on N workers from the measured per-frame costs: a session's F frames are cu
 ``ceil(F / L)`` chains of about L frames, a chain's first frame fitted from the silhouettes
 (``t_start``), the others tracked (``t_track``); the chains run in ``ceil(chains / N)`` waves
 on N workers, plus the session's segmentation and report (sessions one after another).
+It also prints the CPU seconds a frame costs in each runner (``timings["cpu"]`` of the fit
+results): the same work must cost the same wherever it runs, and unlike wall times that figure
+holds on a busy machine (a Dask worker's frames cost 1.5× more before :mod:`studio.allocator`).
 
 Usage: ``.venv/bin/python benchmarks/scaling.py [--frames 12] [--chain-length 6] [--quick]
 [--per-participant 24]`` (needs ``pip install .[dask]``).
@@ -59,6 +62,7 @@ def _estimate(t_start: float, t_track: float, t_segment: float, frames: int, cha
 
 
 def main(argv=None) -> int:
+    from rigs.atomic import atomic_write_json
     from studio.cli.commands.fit import QUICK
     from studio.fit import FitOptions
     from studio.fit.session import CHAIN_LENGTH
@@ -92,7 +96,8 @@ def main(argv=None) -> int:
             res["runs"][name] = {"wall_s": round(wall, 2), "frames_per_hour": round(3600 * len(frames) / wall, 1),
                                  "load_average_1min": round(os.getloadavg()[0], 2),
                                  "chains": summary["chains"], "executor": summary["executor"],
-                                 "frame_s": {str(f): r["timings"]["total"] for f, r in results.items()}}
+                                 "frame_s": {str(f): r["timings"]["total"] for f, r in results.items()},
+                                 "frame_cpu_s": {str(f): r["timings"].get("cpu") for f, r in results.items()}}
             print(f"  {name:30s} {wall:7.1f} s  {3600 * len(frames) / wall:6.1f} frames/h  chains {summary['chains']}",
                   flush=True)
     finally:
@@ -119,10 +124,12 @@ def main(argv=None) -> int:
                target_speedup=TARGET)
     print(f"\nfit scaling — walk sample, {len(frames)} frames, 4 cameras 656×490 "
           f"({'--quick' if args.quick else 'default'} settings)")
-    print(f"  {'runner':30s} {'wall s':>8s} {'frames/h':>9s} {'speed-up':>9s}")
+    print(f"  {'runner':30s} {'wall s':>8s} {'frames/h':>9s} {'speed-up':>9s} {'CPU s/frame':>12s}")
     for name, r in res["runs"].items():
         r["speedup"] = round(base / r["wall_s"], 2)
-        print(f"  {name:30s} {r['wall_s']:8.1f} {r['frames_per_hour']:9.1f} {r['speedup']:8.2f}×")
+        r["cpu_s_per_frame"] = round(float(np.mean(list(r["frame_cpu_s"].values()))), 2)
+        print(f"  {name:30s} {r['wall_s']:8.1f} {r['frames_per_hour']:9.1f} {r['speedup']:8.2f}× "
+              f"{r['cpu_s_per_frame']:12.2f}")
     ok = all(r["speedup"] >= TARGET for n, r in res["runs"].items() if "2" in n)
     print(f"  the plan's bound with 2 workers (work / busiest worker, from the 1-worker frame times): "
           f"{res['plan_bound_2_workers']:.2f}×; load average during the runs: "
@@ -136,7 +143,7 @@ def main(argv=None) -> int:
         print(f"  {row['workers']:3d} workers: {row['session_s']:7.1f} s per participant, study {row['study_h']:6.2f} h")
     out = ROOT / "benchmarks" / "results" / "scaling.json"
     out.parent.mkdir(parents=True, exist_ok=True)
-    out.write_text(json.dumps(res, indent=2) + "\n")
+    atomic_write_json(out, res)
     print(f"wrote {out}")
     return 0
 

@@ -302,7 +302,7 @@ def fit_frame(
     used = [i for i, c in enumerate(cameras) if c.name not in screen["dropped"]]
     cameras, masks = [cameras[i] for i in used], [masks[i] for i in used]
     rng = np.random.default_rng(seed)
-    t_start = time.perf_counter()
+    t_start, cpu_start = time.perf_counter(), time.process_time()
     timings = {}
     init_height = None
     xy = hull_centroid(cameras, masks) if previous_pose is None or shape is None else None
@@ -451,6 +451,7 @@ def fit_frame(
     if init_height is not None:
         costs["init_stature_m"] = init_height
     timings["total"] = time.perf_counter() - t_start
+    timings["cpu"] = time.process_time() - cpu_start  # this process's CPU time: comparable on a busy machine
     log.info("frame %d (%s): cost %.3f in %.1f s", frame, model.gender, costs["total"], timings["total"])
     return FrameFit(
         frame=int(frame), gender=model.gender, shape=shape_out, pose=pose_out,

@@ -28,6 +28,7 @@ from studio.segment.classify import Thresholds, classify_pixels
 from studio.segment.errors import SegmentationError
 from studio.segment.hsv import check_rgb, circular_mean, circular_std, rgb_to_hsv
 from studio.segment.morphology import Morphology, clean_labels
+from studio.segment.registration import estimate_shift, shift_hsv, shift_image
 
 __all__ = ["BackgroundModel", "MODEL_FORMAT", "MODEL_VERSION"]
 
@@ -207,6 +208,28 @@ class BackgroundModel:
     def running_mean(self) -> np.ndarray | None:
         """(H, W, 3) float32 RGB running mean of :meth:`apply` in 8-bit levels (None before the first call)."""
         return None if self._running is None else self._running[0]
+
+    # ------------------------------------------------------------------ registration
+    def estimate_shift(self, frames: Iterable[np.ndarray], min_response: float = 0.1) -> tuple[float, float]:
+        """Median ``(dx, dy)`` by which ``frames`` are moved against the empty scene (phase
+        correlation of the value channel; frames whose peak is below ``min_response`` are
+        ignored, (0, 0) when none is left)."""
+        shifts = []
+        for i, frame in enumerate(frames):
+            v = rgb_to_hsv(self._check_frame(frame, f"registration frame {i}"))[..., 2]
+            dx, dy, response = estimate_shift(self.mean[..., 2], v)
+            if response >= min_response:
+                shifts.append((dx, dy))
+        if not shifts:
+            return 0.0, 0.0
+        dx, dy = np.median(np.asarray(shifts), axis=0)
+        return float(dx), float(dy)
+
+    def shifted(self, dx: float, dy: float) -> "BackgroundModel":
+        """The model moved by (dx, dy) pixels onto frames taken after the camera was nudged."""
+        return BackgroundModel(shift_hsv(self.mean, dx, dy), shift_image(self.std, dx, dy),
+                               thresholds=self.thresholds, morphology=self.morphology,
+                               frames_used=self.frames_used, adaptive=self.adaptive)  # fmt: skip
 
     # ------------------------------------------------------------------ classification
     @property

@@ -300,7 +300,7 @@ def main(argv=None) -> int:
                     help="folders to search for a simulated session (default: studio/samples/)")  # fmt: skip
     ap.add_argument("--quick", action="store_true", help="fewer frames everywhere")
     ap.add_argument("--workers", type=int, default=2)
-    ap.add_argument("--skip", action="append", default=[], choices=["sim", "cdnet", "skin", "speed"])
+    ap.add_argument("--skip", action="append", default=[], choices=["sim", "cdnet", "skin", "speed", "throughput"])
     args = ap.parse_args(argv)
     results = {"date": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime())}
     if "sim" not in args.skip:
@@ -314,6 +314,10 @@ def main(argv=None) -> int:
         results["skin"] = bench_skin()
     if "speed" not in args.skip:
         results["speed"] = bench_speed(args.quick, args.workers)
+    if "throughput" not in args.skip:
+        from segmentation_speed import bench_throughput
+
+        results["throughput"] = bench_throughput(DATA, args.quick)
     RESULTS.parent.mkdir(parents=True, exist_ok=True)
     RESULTS.write_text(json.dumps(results, indent=2, default=float) + "\n")
     print(f"\nwrote {RESULTS}")

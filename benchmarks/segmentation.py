@@ -19,7 +19,11 @@ Parts, one run, side by side:
    multi-frames/s. Reported single-process wall clock, CPU time per multi-frame (one OpenCV
    thread) and the throughput of 2 worker processes.
 
-Run: ``.venv/bin/python benchmarks/segmentation.py [--session DIR] [--quick]``.
+5. **Throughput** (``segmentation_speed.py``): 4 views, toolkit vs GSOC vs MOG2, same frames.
+6. **UU capture** (``segmentation_uu.py``): empty-scene false positives per frame, registration
+   and mask quality on the person frames, the chair case as a picture.
+
+Run: ``.venv/bin/python benchmarks/segmentation.py [--session DIR] [--quick] [--skip PART]``.
 Writes ``benchmarks/results/segmentation.json``.
 """
 
@@ -63,6 +67,10 @@ def _fmt(x: float) -> str:
 
 
 # ---------------------------------------------------------------------- 1. simulated
+_STAGES = {"before": "before", "after_labels_only": "vote-lab", "after": "vote", "adaptive_before": "apply",
+           "adaptive_after": "apply+v"}
+
+
 def find_sim_session(search: list[Path]) -> Path | None:
     for root in search:
         if not root.is_dir():
@@ -108,6 +116,17 @@ def bench_simulated(session_path: Path | None, quick: bool) -> dict:
             labels_only[c].append(plain[c])
             after[c].append(voted[c])
             truth[c].append(read_image(lay.truth_labels(c, index)))
+    # the adaptive model (BackgroundModel.apply: started from the same fit, updated every frame)
+    running = {c: models[c].with_settings() for c in cams}
+    ad_before, ad_after, ad_truth = [], [], []
+    for index in frames:
+        images = session.frame(index)
+        analysed = {c: running[c].apply_analyse(images[c]) for c in cams}
+        voted = voter.vote({c: a[0] for c, a in analysed.items()}, {c: a[1] for c, a in analysed.items()}).labels
+        for c in cams:
+            ad_before.append(analysed[c][0])
+            ad_after.append(voted[c])
+            ad_truth.append(read_image(lay.truth_labels(c, index)))
     per_camera = {}
     for c in cams:
         per_camera[c] = {"before": label_scores(before[c], truth[c]), "after": label_scores(after[c], truth[c])}
@@ -115,16 +134,19 @@ def bench_simulated(session_path: Path | None, quick: bool) -> dict:
         "before": label_scores(sum(before.values(), []), sum(truth.values(), [])),
         "after_labels_only": label_scores(sum(labels_only.values(), []), sum(truth.values(), [])),
         "after": label_scores(sum(after.values(), []), sum(truth.values(), [])),
+        "adaptive_before": label_scores(ad_before, ad_truth),
+        "adaptive_after": label_scores(ad_after, ad_truth),
     }
     print(f"\n== 1. Simulated multi-view session: {source}\n   {session.path}, {len(frames)} frames × {len(cams)} cameras")
     print("   stages: before = single view + morphology; vote-lab = voting on labels only; "
-          "vote = voting with photometric consistency (what `studio segment` does)")
+          "vote = voting with photometric consistency (what `studio segment` does); apply / apply+v = the "
+          "adaptive model (BackgroundModel.apply) before / after voting")
     print(f"{'camera':<8} {'stage':<8} {'person P':>9} {'R':>6} {'F1':>6}   {'shadow P':>9} {'R':>6} {'F1':>6}")
     for c, rows in list(per_camera.items()) + [("all", overall)]:
-        for stage in [k for k in ("before", "after_labels_only", "after") if k in rows]:
+        for stage in [k for k in ("before", "after_labels_only", "after", "adaptive_before", "adaptive_after") if k in rows]:
             p, s = rows[stage]["person"], rows[stage]["shadow"]
             print(
-                f"{c:<8} {stage.replace('after_labels_only', 'vote-lab').replace('after', 'vote'):<8} {_fmt(p['precision']):>9} {_fmt(p['recall']):>6} {_fmt(p['f1']):>6}   "
+                f"{c:<8} {_STAGES[stage]:<8} {_fmt(p['precision']):>9} {_fmt(p['recall']):>6} {_fmt(p['f1']):>6}   "
                 f"{_fmt(s['precision']):>9} {_fmt(s['recall']):>6} {_fmt(s['f1']):>6}"
             )
     # fig. 5.3's point: a permissive shadow gate (the outdoor CDnet-like one) mislabels dark
@@ -300,7 +322,7 @@ def main(argv=None) -> int:
                     help="folders to search for a simulated session (default: studio/samples/)")  # fmt: skip
     ap.add_argument("--quick", action="store_true", help="fewer frames everywhere")
     ap.add_argument("--workers", type=int, default=2)
-    ap.add_argument("--skip", action="append", default=[], choices=["sim", "cdnet", "skin", "speed", "throughput"])
+    ap.add_argument("--skip", action="append", default=[], choices=["sim", "cdnet", "skin", "speed", "throughput", "uu"])
     args = ap.parse_args(argv)
     results = {"date": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime())}
     if "sim" not in args.skip:
@@ -314,6 +336,10 @@ def main(argv=None) -> int:
         results["skin"] = bench_skin()
     if "speed" not in args.skip:
         results["speed"] = bench_speed(args.quick, args.workers)
+    if "uu" not in args.skip:
+        from segmentation_uu import bench_uu
+
+        results["uu_capture"] = bench_uu(DATA, RESULTS.parent, args.quick)
     if "throughput" not in args.skip:
         from segmentation_speed import bench_throughput
 

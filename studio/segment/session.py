@@ -71,6 +71,7 @@ class SegmentOptions:
     floor_resolution: float = 0.02  # metres per cell of the floor vote image
     register: bool = True  # move each background model onto the session's frames (a nudged camera)
     largest_component: bool = False  # keep only the largest person component per view
+    hull: bool = False  # drop person components the visual hull of all views does not explain
 
 
 @dataclass(frozen=True)
@@ -101,7 +102,8 @@ def _setup_state(state: dict) -> None:
     _STATE["session"] = Session.open(state["path"])
     _STATE["layout"] = Layout(state["out"], source=state["path"])
     calib = state.get("calibration")
-    _STATE["voter"] = ShadowVoter(calib, state["cameras"]) if calib is not None else None
+    _STATE["voter"] = ShadowVoter(calib, state["cameras"]) if calib is not None and state.get("voting", True) else None
+    _STATE["hull_cameras"] = {c: calib[c] for c in state["cameras"]} if calib is not None and state.get("hull") else None
     grid = state.get("grid")
     _STATE["floor_votes"] = (
         FloorVotes(calib, grid, state["cameras"]) if grid is not None and state["overlay_every"] > 0 else None
@@ -121,9 +123,10 @@ def _load_state(spec: dict) -> dict:
     skin_file = options.skin_model
     skin = {cam: SkinClassifier.load(skin_file if skin_file is not None else ws.layout.skin_model(cam))
             for cam in spec["skin_cameras"]}
-    calib = ws.calibration if spec["voting"] else None
+    calib = ws.calibration if spec["voting"] or spec["hull"] else None
     _setup_state({"path": spec["path"], "out": spec["out"], "cameras": ws.camera_names, "models": models,
-                  "largest_component": bool(options.largest_component),
+                  "largest_component": bool(options.largest_component), "voting": spec["voting"],
+                  "hull": spec["hull"],
                   "calibration": calib, "overlay_every": int(options.overlay_every), "skin": skin,
                   "grid": _floor_grid(calib, options.floor_resolution) if calib is not None else None})
     _STATE["token"] = spec["token"]
@@ -160,9 +163,16 @@ def _segment_frame(index: int, state: dict) -> tuple[dict, dict, dict]:
     if voter is not None:
         result = voter.vote(labels, ratios)
         labels, relabelled = result.labels, result.relabelled
+    dropped = {}
+    if state.get("hull_cameras"):
+        from studio.segment.hull import hull_filter
+
+        labels, dropped = hull_filter(labels, state["hull_cameras"])
     quality = {}
     for cam in state["cameras"]:
         labels[cam], quality[cam] = person_components(labels[cam], state.get("largest_component", False))
+        if state.get("hull_cameras"):
+            quality[cam]["hull_dropped"] = dropped.get(cam, 0)
     state["last_quality"] = quality
     return frame, labels, relabelled
 
@@ -320,6 +330,7 @@ def _settings(models: dict, options: SegmentOptions, voting: bool, skin_cameras,
         "floor_resolution": float(options.floor_resolution),
         "registration": registration,
         "largest_component": bool(options.largest_component),
+        "hull": bool(options.hull),
     }
 
 
@@ -379,8 +390,11 @@ def segment_session(
     registration = _registration(ws, models, frames, options)
     models = {cam: _registered(m, registration.get(cam)) for cam, m in models.items()}
     voting = options.voting and len(cameras) >= 2
+    hull = options.hull and len(cameras) >= 2
     try:
         calib = ws.require_calibration("multi-view shadow voting (or segment with --no-voting)") if voting else None
+        if hull and calib is None:
+            calib = ws.require_calibration("the visual-hull check of the masks (--hull)")
     except WorkspaceError as exc:
         raise SegmentationError(str(exc)) from None
     state = {
@@ -389,6 +403,8 @@ def segment_session(
         "cameras": cameras,
         "models": models,
         "calibration": calib,
+        "voting": voting,
+        "hull": hull,
         "overlay_every": int(options.overlay_every),
         "grid": _floor_grid(calib, options.floor_resolution) if calib is not None else None,
         "skin": {},
@@ -399,7 +415,7 @@ def segment_session(
     # workers elsewhere read a given skin model by its absolute path
     unit_options = options if options.skin_model is None else replace(options, skin_model=Path(options.skin_model).resolve())
     spec = {"token": uuid.uuid4().hex, "path": str(ws.path), "out": str(ws.layout.root), "options": unit_options,
-            "voting": voting, "skin_cameras": sorted(state["skin"]), "registration": registration}
+            "voting": voting, "hull": hull, "skin_cameras": sorted(state["skin"]), "registration": registration}
     settings = _settings(models, options, voting, state["skin"], registration)
     skipped = [] if force else _done_frames(ws, frames, settings)
     todo = [i for i in frames if i not in set(skipped)]

@@ -169,3 +169,29 @@ def test_a_nudged_camera_is_registered_and_mask_quality_is_written(fresh):
     assert 0.01 < q["person_fraction_mean"] < 0.5 and 0.0 <= q["clutter_mean"] <= q["clutter_max"] < 0.2
     assert set(meta["frame_quality"]) == {"0", "1", "2"}
     assert meta["frame_quality"]["1"]["cam0"]["components"] >= 1
+
+
+def test_hull_check_drops_clutter_one_view_alone_sees(fresh):
+    """A bright patch painted into cam0's frames (a lamp, a moved tripod) is person in cam0 only;
+    the visual hull of the three views does not explain it and --hull drops it, the person stays."""
+    from rigs.imageio import write_image
+
+    for path in sorted((fresh / "frames" / "cam0").glob("*.png")):
+        img = read_image(path)
+        img[2:12, 2:14] = (250, 20, 200)
+        write_image(path, img)
+    truth = _labels(fresh, ["cam0"], [0, 1, 2], "labels")
+    runs = {}
+    for hull in (False, True):
+        assert main(["segment", str(fresh), "--no-skin", "--overlay-every", "0"] + (["--hull"] if hull else [])) == 0
+        meta = json.loads((fresh / "segmentation" / "segmentation.json").read_text())
+        runs[hull] = (label_scores(_labels(fresh, ["cam0"], [0, 1, 2]), truth)["person"], meta)
+    plain, checked = runs[False][0], runs[True][0]
+    assert all(_labels(fresh, ["cam0"], [i])[0][2:12, 2:14].mean() == 0 for i in (0, 1, 2))
+    assert checked["precision"] > plain["precision"] + 0.02 and checked["recall"] >= plain["recall"] - 0.01
+    q_plain, q_checked = runs[False][1]["frame_quality"]["1"]["cam0"], runs[True][1]["frame_quality"]["1"]["cam0"]
+    assert q_plain["components"] == 2 and q_plain["clutter"] > 0.05
+    assert q_checked["components"] == 1 and q_checked["clutter"] == 0 and q_checked["hull_dropped"] >= 100
+    assert runs[True][1]["settings"]["hull"] is True
+    # the other views keep their person whole
+    assert runs[True][1]["frame_quality"]["1"]["cam1"]["hull_dropped"] == 0

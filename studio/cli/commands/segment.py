@@ -39,6 +39,8 @@ def register(subparsers) -> None:
                         "empty-scene capture is measured by phase correlation and compensated)")  # fmt: skip
     p.add_argument("--largest-component", action="store_true",
                    help="keep only the largest person component per view (clutter is reported either way)")
+    p.add_argument("--hull", action="store_true",
+                   help="drop person components the visual hull of all views does not explain (needs the calibration)")
     p.add_argument("--t-hsv", type=float, default=None, help="eq. 5.5 background threshold t^HSV")
     p.add_argument("--t-s", type=float, default=None, help="eq. 5.5 saturation threshold t^S")
     p.add_argument("--force", action="store_true",
@@ -78,6 +80,7 @@ def run(args) -> int:
         overlay_every=max(0, args.overlay_every),
         register=not args.no_register,
         largest_component=args.largest_component,
+        hull=args.hull,
     )
     total = len(frames) if frames is not None else len(ws.frame_indices)
     with Progress(

@@ -340,6 +340,10 @@ def main(argv=None) -> int:
         from segmentation_uu import bench_uu
 
         results["uu_capture"] = bench_uu(DATA, RESULTS.parent, args.quick)
+        if results["uu_capture"] is not None:
+            from segmentation_uu import bench_uu_pipeline
+
+            results["uu_capture"]["pipeline"] = bench_uu_pipeline(DATA, args.quick)
     if "throughput" not in args.skip:
         from segmentation_speed import bench_throughput
 

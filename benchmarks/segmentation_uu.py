@@ -9,6 +9,12 @@
   in the empty scene): the registration shift measured per camera, and the person mask's quality
   figures (:func:`studio.segment.morphology.person_components`: fraction of the image,
   components, clutter = share outside the largest component) without and with registration.
+* **The whole pipeline** (``studio calibrate extrinsics|floor`` on the board videos with corner-0
+  hints from the course's ``config.xml``, as ``tests/studio/test_uu_footage.py`` does, then
+  ``studio import`` and :func:`studio.segment.segment_session`): per camera the mask quality
+  figures and shadow share without voting, with voting (§5.5.2: pixels relabelled, share of
+  floor cells labelled shadow by one view that another view confirms) and with the visual-hull
+  check (person pixels dropped).
 * **The chair case as a picture**: ``benchmarks/results/segmentation_uu_chair.png``, the four
   views of frame 200 with the labels (person blue, shadow red) after registration.
 """
@@ -103,3 +109,81 @@ def bench_uu(data: Path, results_dir: Path, quick: bool) -> dict | None:
     print(f"   the chair case: {picture.name} (frame 200, person blue, shadow red). The chair is labelled "
           "person: it is a real object absent from the empty scene, seen consistently by all views")  # fmt: skip
     return {"empty_scene_false_positives": stability, "person_frames": persons, "picture": picture.name}
+
+
+def _calibrated_session(root: Path, tmp: Path, frames: str) -> Path:
+    """Calibrate the rig from the board videos and import ``frames`` of the person videos."""
+    import contextlib
+    import io
+    import json
+
+    from calibration import RigCalibration
+    from studio.cli import main
+
+    ref = RigCalibration.load_any(root)
+    RigCalibration({n: c.replace(R=np.eye(3), t=np.zeros(3)) for n, c in ref.cameras.items() if n in CAMS}).save(
+        tmp / "intrinsics.json")  # fmt: skip
+    (tmp / "board.yaml").write_text("name: uu_floor_8x6\nkind: checkerboard\ninner_corners: [8, 6]\nsquare_size: 0.115\n")
+    corner0 = np.zeros((1, 3))
+    (tmp / "corners.json").write_text(json.dumps({n: [round(float(v)) for v in ref[n].project(corner0)[0]] for n in CAMS}))
+    boards = [f"{n}={root / n / 'checkerboard.avi'}" for n in CAMS]
+    common = ["--board", str(tmp / "board.yaml"), "--video-frames", "0,60"]
+    session = tmp / "session"
+    argv_import = ["import", str(session), "--frames", frames, "--background-frames", "8",
+                   "--calibration", str(tmp / "floor.json")]  # fmt: skip
+    for n in CAMS:
+        argv_import += ["--video", f"{n}={root / n / 'video.avi'}", "--background", f"{n}={root / n / 'background.avi'}"]
+    with contextlib.redirect_stdout(io.StringIO()), contextlib.redirect_stderr(io.StringIO()):
+        for argv in (["calibrate", "extrinsics", *common, "--intrinsics", str(tmp / "intrinsics.json"), "--corners",
+                      str(tmp / "corners.json"), "-o", str(tmp / "ex.json"), *boards],
+                     ["calibrate", "floor", *common, "--calibration", str(tmp / "ex.json"), "-o",
+                      str(tmp / "floor.json"), *boards], argv_import):  # fmt: skip
+            if main(argv) != 0:
+                raise RuntimeError(f"studio {argv[0]} {argv[1]} failed on the UU capture")
+    return session
+
+
+def bench_uu_pipeline(data: Path, quick: bool) -> dict | None:
+    import tempfile
+
+    from rigs.imageio import read_image
+    from studio.segment import FloorVotes, SegmentOptions, segment_session
+    from studio.workspace import Workspace
+
+    root = data / "multiview" / "uu_infomcv_4cam_person"
+    if not root.is_dir():
+        return None
+    with tempfile.TemporaryDirectory() as tmp:
+        session = _calibrated_session(root, Path(tmp), "100:301:100" if quick else "100:401:50")
+        ws = Workspace.open(session)
+        from studio.segment.session import _floor_grid
+
+        votes = FloorVotes(ws.calibration, _floor_grid(ws.calibration, 0.02), ws.camera_names)
+        variants = {"no voting": SegmentOptions(voting=False, skin=False, overlay_every=0),
+                    "voting": SegmentOptions(skin=False, overlay_every=0),
+                    "voting + hull": SegmentOptions(skin=False, overlay_every=0, hull=True)}  # fmt: skip
+        rows = {}
+        for name, options in variants.items():
+            summary = segment_session(ws, options, force=True)
+            meta = __import__("json").loads(ws.layout.segmentation_summary.read_text())
+            confirmed = []
+            shadow = {c: [] for c in ws.camera_names}
+            for i in summary.frames:
+                labels = {c: read_image(ws.layout.labels(c, i)) for c in ws.camera_names}
+                v = votes(labels)
+                confirmed.append(float((v >= 2).sum() / max((v >= 1).sum(), 1)))
+                for c in ws.camera_names:
+                    shadow[c].append(float(np.mean(labels[c] == SHADOW)))
+            rows[name] = {"quality": meta["quality"], "relabelled": summary.relabelled,
+                          "shadow_fraction": {c: float(np.mean(v)) for c, v in shadow.items()},
+                          "floor_shadow_confirmed": float(np.mean(confirmed)),
+                          "hull_dropped": {c: int(sum(q[c].get("hull_dropped", 0) for q in meta["frame_quality"].values()))
+                                           for c in ws.camera_names}}  # fmt: skip
+        frames = len(summary.frames)
+    print(f"   whole pipeline on {frames} person frames (rig calibrated from the board videos, session imported): "
+          "clutter mean (components) | shadow % | voting relabelled px | hull dropped px")  # fmt: skip
+    for name, r in rows.items():
+        cells = "  ".join(f"{c} {r['quality'][c]['clutter_mean']:.3f} ({100 * r['shadow_fraction'][c]:.2f} %, "
+                          f"{r['relabelled'][c]}, {r['hull_dropped'][c]})" for c in r["quality"])  # fmt: skip
+        print(f"   {name:<14} {cells}; floor shadow cells seen by 2+ views: {r['floor_shadow_confirmed']:.3f}")
+    return rows

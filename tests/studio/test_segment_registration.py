@@ -52,3 +52,18 @@ def test_person_components_figures_and_keep_largest():
     kept, _ = person_components(labels, keep_largest=True)
     assert (kept == PERSON).sum() == 600 and (kept[40:46, 40:50] == 0).all() and (kept == SHADOW).sum() > 0
     assert person_components(np.zeros((5, 5), np.uint8))[1] == {"person_fraction": 0.0, "components": 0, "clutter": 0.0}
+
+
+def test_hull_filter_leaves_views_alone_when_the_views_share_no_hull():
+    from studio.segment.hull import hull_filter
+    from studio.segment.synthetic import ring_calibration
+
+    calib = ring_calibration(3, (96, 72))
+    cams = {n: calib[n] for n in calib.camera_names}
+    labels = {n: np.zeros((72, 96), np.uint8) for n in cams}
+    for k, n in enumerate(cams):  # a blob in a different corner of every view: no common 3-D point
+        labels[n][2 + 30 * (k % 2) : 20 + 30 * (k % 2), 2 + 40 * k // 2 : 20 + 40 * k // 2] = PERSON
+    out, dropped = hull_filter(labels, cams)
+    assert dropped == {n: 0 for n in cams} and all((out[n] == labels[n]).all() for n in cams)
+    one = {n: (labels[n] if k == 0 else np.zeros_like(labels[n])) for k, n in enumerate(cams)}
+    assert hull_filter(one, cams)[1] == {n: 0 for n in cams}  # a single view with a person: nothing to check

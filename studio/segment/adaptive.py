@@ -18,7 +18,7 @@ ratios:
 * else person.
 
 The per-pixel work is one compiled loop (numba, ``cache=True``): the labels, the value ratio for
-voting and the update of ``μ`` and ``δ`` in a single read of the frame (~1.5 ms for 656×490 on
+voting and the update of ``μ`` and ``δ`` in a single read of the frame (~2.3 ms of CPU for 656×490 on
 one core). The first ``warmup`` frames adapt with rate ``1/n`` (a running mean of everything
 seen), so a model can start from any frame.
 """

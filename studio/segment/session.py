@@ -243,7 +243,8 @@ def _registered(model: BackgroundModel, shift) -> BackgroundModel:
 
 def _registration(ws, models: dict, frames: list[int], options: SegmentOptions, count: int = 5) -> dict:
     """Per camera ``[dx, dy]`` by which the session's frames are moved against the empty scene
-    (median over ``count`` frames spread over the session; shifts under 0.25 px are noise: 0)."""
+    (median over ``count`` frames spread over the session, to 0.1 px; shifts under 0.25 px are
+    noise: 0)."""
     if not options.register:
         return {}
     sample = sorted({frames[int(i)] for i in np.linspace(0, len(frames) - 1, min(count, len(frames))).round()})
@@ -251,7 +252,8 @@ def _registration(ws, models: dict, frames: list[int], options: SegmentOptions, 
     out = {}
     for cam, model in models.items():
         dx, dy = model.estimate_shift([im[cam] for im in images])
-        out[cam] = [round(dx, 2), round(dy, 2)] if np.hypot(dx, dy) >= 0.25 else [0.0, 0.0]
+        # to 0.1 px: a rerun on another selection of frames keeps the same settings (and its frames)
+        out[cam] = [round(dx, 1), round(dy, 1)] if np.hypot(dx, dy) >= 0.25 else [0.0, 0.0]
         if out[cam] != [0.0, 0.0]:
             log.info("camera %s: frames moved by (%.2f, %.2f) px against the empty scene: model registered",
                      cam, *out[cam])

@@ -180,11 +180,12 @@ def _blobs(mask: np.ndarray) -> list[int]:
     return sorted((int(a) for a in stats[1:, cv2.CC_STAT_AREA]), reverse=True)
 
 
-def _hull_explained(cameras, masks, *, step: float = 0.03, factor: int = 4) -> list[float]:
-    """Share of every view's silhouette covered by the projection of the visual hull of all
-    views (a coarse grid of ``step`` m around the hull's floor centroid, masks pooled by
-    ``factor``). A view inconsistent with the others (wrong calibration, wrong mask) is
-    carved away by them and comes out poorly explained."""
+def hull_hits(cameras, masks, *, step: float = 0.03, factor: int = 4) -> list[np.ndarray]:
+    """Per view, the cells (masks pooled by ``factor``, :func:`pool_any`) onto which the visual
+    hull of all views projects: a coarse grid of ``step`` m around the hull's floor centroid,
+    carved by every mask, projected back and closed by one cell."""
+    import cv2
+
     from studio.fit.init import _in_mask, hull_centroid
 
     xy = hull_centroid(cameras, masks)
@@ -199,8 +200,7 @@ def _hull_explained(cameras, masks, *, step: float = 0.03, factor: int = 4) -> l
     out = []
     for cam, mask in zip(cameras, masks, strict=True):
         h, w = mask.shape
-        coarse = pool_any(mask, factor)
-        hit = np.zeros_like(coarse)
+        hit = np.zeros(pool_any(mask, factor).shape, dtype=bool)
         if len(hull):
             uv, _, front = cam.project_points(hull)
             ok = front & np.isfinite(uv).all(axis=1)
@@ -208,9 +208,18 @@ def _hull_explained(cameras, masks, *, step: float = 0.03, factor: int = 4) -> l
             v = np.clip(np.rint(uv[ok, 1]).astype(int), 0, h - 1) // factor
             hit[v, u] = True
             # the grid is coarser than a pooled pixel far from the camera: close the gaps
-            import cv2
-
             hit = cv2.dilate(hit.astype(np.uint8), np.ones((3, 3), np.uint8)).astype(bool)
+        out.append(hit)
+    return out
+
+
+def _hull_explained(cameras, masks, *, step: float = 0.03, factor: int = 4) -> list[float]:
+    """Share of every view's silhouette covered by the projection of the visual hull of all
+    views (:func:`hull_hits`). A view inconsistent with the others (wrong calibration, wrong
+    mask) is carved away by them and comes out poorly explained."""
+    out = []
+    for mask, hit in zip(masks, hull_hits(cameras, masks, step=step, factor=factor), strict=True):
+        coarse = pool_any(mask, factor)
         n = int(np.count_nonzero(coarse))
         out.append(float(np.count_nonzero(hit & coarse) / n) if n else 0.0)
     return out

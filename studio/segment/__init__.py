@@ -4,6 +4,7 @@ morphology, multi-view shadow voting and the skin classifier (thesis §5.5, §6.
 >>> from studio.segment import BackgroundModel, vote_shadows, SkinClassifier
 """
 
+from studio.segment.adaptive import AdaptiveSettings, learn_tint
 from studio.segment.background import BackgroundModel
 from studio.segment.classify import BACKGROUND, PERSON, SHADOW, Thresholds, classify_pixels
 from studio.segment.errors import SegmentationError
@@ -15,6 +16,7 @@ from studio.segment.skin import SkinClassifier, ycrcb_skin
 from studio.segment.voting import FloorVotes, ShadowVoter, VotingResult, encode_ratio, floor_vote_image, vote_shadows
 
 __all__ = [
+    "AdaptiveSettings",
     "BACKGROUND",
     "PERSON",
     "SHADOW",
@@ -37,6 +39,7 @@ __all__ = [
     "fill_holes",
     "floor_vote_image",
     "hue_distance",
+    "learn_tint",
     "remove_small_components",
     "rgb_to_hsv",
     "segment_session",

@@ -23,10 +23,12 @@ from pathlib import Path
 import cv2
 import numpy as np
 
+from studio.segment.adaptive import AdaptiveSettings, adaptive_step
 from studio.segment.classify import Thresholds, classify_pixels
 from studio.segment.errors import SegmentationError
 from studio.segment.hsv import check_rgb, circular_mean, circular_std, rgb_to_hsv
 from studio.segment.morphology import Morphology, clean_labels
+from studio.segment.registration import estimate_shift, shift_hsv, shift_image
 
 __all__ = ["BackgroundModel", "MODEL_FORMAT", "MODEL_VERSION"]
 
@@ -45,6 +47,20 @@ def _robust_weights(rgb: np.ndarray, outlier_scale: float, min_spread: float) ->
     spread = 1.4826 * np.median(dist, axis=0)
     limit = np.maximum(outlier_scale * spread, min_spread)
     return (dist <= limit).astype(np.float32)
+
+
+def _running_from_rgb(frame: np.ndarray) -> tuple[np.ndarray, np.ndarray, int]:
+    scale = 1.0 if frame.dtype == np.uint8 else 1.0 / 257.0
+    mean = frame.astype(np.float32) * np.float32(scale)
+    return mean, np.zeros_like(mean), 1  # the first frame counts as seen
+
+
+def _running_from_hsv(hsv_mean: np.ndarray, seen: int) -> tuple[np.ndarray, np.ndarray, int]:
+    """Running RGB state from a fitted HSV mean (already warmed up: the empty scene is known)."""
+    hsv = hsv_mean.copy()
+    hsv[..., 0] *= np.float32(360.0)
+    rgb = cv2.cvtColor(hsv, cv2.COLOR_HSV2RGB) * np.float32(255.0)
+    return rgb, np.zeros_like(rgb), seen
 
 
 def _hsv_statistics(hsv: np.ndarray, w: np.ndarray | None) -> tuple[np.ndarray, np.ndarray]:
@@ -78,6 +94,7 @@ class BackgroundModel:
     thresholds : eq. 5.5 thresholds.
     morphology : clean-up sizes (§5.5.1).
     frames_used : number of empty-scene frames the model was fitted on.
+    adaptive : settings of :meth:`apply` (the running model, :mod:`studio.segment.adaptive`).
     """
 
     mean: np.ndarray
@@ -85,6 +102,7 @@ class BackgroundModel:
     thresholds: Thresholds = field(default_factory=Thresholds)
     morphology: Morphology = field(default_factory=Morphology)
     frames_used: int = 0
+    adaptive: AdaptiveSettings = field(default_factory=AdaptiveSettings)
 
     def __post_init__(self):
         mean = np.asarray(self.mean, dtype=np.float32)
@@ -98,6 +116,7 @@ class BackgroundModel:
         self._inv_std = (1.0 / std).astype(np.float32)
         # value ratio I^V / μ^V encoded as uint8 200·ratio (voting.encode_ratio), by one multiply
         self._ratio_scale = (200.0 / np.maximum(mean[..., 2], 1e-3)).astype(np.float32)
+        self._running = None  # (mean, deviation, frames seen) of apply(), started on first use
 
     # ------------------------------------------------------------------ fitting
     @classmethod
@@ -151,6 +170,67 @@ class BackgroundModel:
             frames_used=len(frames),
         )
 
+    @classmethod
+    def start(cls, frame: np.ndarray, *, adaptive: AdaptiveSettings | None = None, **settings) -> "BackgroundModel":
+        """A model to be learned while it runs (:meth:`apply`), from a first frame that may contain
+        foreground (no empty-scene frames, as on CDnet): the first ``adaptive.warmup`` frames are
+        averaged, then the selective update takes over."""
+        frame = check_rgb(frame, "first frame")
+        model = cls(rgb_to_hsv(frame), np.zeros(frame.shape, np.float32), adaptive=adaptive or AdaptiveSettings(),
+                    **settings)  # fmt: skip
+        model._running = _running_from_rgb(frame)
+        return model
+
+    # ------------------------------------------------------------------ adaptive
+    def apply(self, frame: np.ndarray, clean: bool = True, name: str = "frame") -> np.ndarray:
+        """Classify ``frame`` with the running model and update it (as OpenCV's subtractors do).
+
+        The running per-pixel RGB mean and deviation start from the fitted empty-scene mean (or
+        from :meth:`start`'s first frame) and follow illumination drift; pixels labelled
+        foreground adapt ``adaptive.foreground_rate`` times as fast, so an object left in the
+        scene becomes background after ~``1/foreground_rate`` frames. :meth:`classify` stays
+        the fixed model of eq. 5.4–5.5. Returns (H, W) uint8 labels 0/1/2 (after morphology
+        unless ``clean`` is False).
+        """
+        return self.apply_analyse(frame, clean, name)[0]
+
+    def apply_analyse(self, frame: np.ndarray, clean: bool = True, name: str = "frame") -> tuple[np.ndarray, np.ndarray]:
+        """:meth:`apply` returning ``(labels, ratio8)`` as :meth:`analyse` does (for voting)."""
+        frame = self._check_frame(frame, name)
+        if self._running is None:
+            self._running = _running_from_hsv(self.mean, self.adaptive.warmup)
+        mean, dev, seen = self._running
+        labels, ratio8 = adaptive_step(frame, mean, dev, self.adaptive, seen)
+        self._running = (mean, dev, seen + 1)
+        return (clean_labels(labels, self.morphology) if clean else labels), ratio8
+
+    @property
+    def running_mean(self) -> np.ndarray | None:
+        """(H, W, 3) float32 RGB running mean of :meth:`apply` in 8-bit levels (None before the first call)."""
+        return None if self._running is None else self._running[0]
+
+    # ------------------------------------------------------------------ registration
+    def estimate_shift(self, frames: Iterable[np.ndarray], min_response: float = 0.1) -> tuple[float, float]:
+        """Median ``(dx, dy)`` by which ``frames`` are moved against the empty scene (phase
+        correlation of the value channel; frames whose peak is below ``min_response`` are
+        ignored, (0, 0) when none is left)."""
+        shifts = []
+        for i, frame in enumerate(frames):
+            v = rgb_to_hsv(self._check_frame(frame, f"registration frame {i}"))[..., 2]
+            dx, dy, response = estimate_shift(self.mean[..., 2], v)
+            if response >= min_response:
+                shifts.append((dx, dy))
+        if not shifts:
+            return 0.0, 0.0
+        dx, dy = np.median(np.asarray(shifts), axis=0)
+        return float(dx), float(dy)
+
+    def shifted(self, dx: float, dy: float) -> "BackgroundModel":
+        """The model moved by (dx, dy) pixels onto frames taken after the camera was nudged."""
+        return BackgroundModel(shift_hsv(self.mean, dx, dy), shift_image(self.std, dx, dy),
+                               thresholds=self.thresholds, morphology=self.morphology,
+                               frames_used=self.frames_used, adaptive=self.adaptive)  # fmt: skip
+
     # ------------------------------------------------------------------ classification
     @property
     def shape(self) -> tuple[int, int]:
@@ -158,15 +238,20 @@ class BackgroundModel:
         return self.mean.shape[:2]
 
     def with_settings(
-        self, thresholds: Thresholds | None = None, morphology: Morphology | None = None
+        self,
+        thresholds: Thresholds | None = None,
+        morphology: Morphology | None = None,
+        adaptive: AdaptiveSettings | None = None,
     ) -> "BackgroundModel":
-        """A model with the same statistics and changed thresholds / morphology."""
+        """A model with the same statistics and changed settings (the running state of
+        :meth:`apply` starts afresh)."""
         return BackgroundModel(
             self.mean,
             self.std,
             thresholds=thresholds or self.thresholds,
             morphology=morphology or self.morphology,
             frames_used=self.frames_used,
+            adaptive=adaptive or self.adaptive,
         )
 
     def _check_frame(self, frame: np.ndarray, name: str) -> np.ndarray:
@@ -223,6 +308,7 @@ class BackgroundModel:
                 "size": [int(self.shape[1]), int(self.shape[0])],
                 "frames_used": int(self.frames_used),
                 "thresholds": self.thresholds.to_dict(),
+                "adaptive": self.adaptive.to_dict(),
                 "morphology": {
                     "median": m.median,
                     "open_radius": m.open_radius,
@@ -270,4 +356,5 @@ class BackgroundModel:
             thresholds=Thresholds.from_dict(meta["thresholds"]),
             morphology=Morphology(**meta["morphology"]),
             frames_used=int(meta.get("frames_used", 0)),
+            adaptive=AdaptiveSettings.from_dict(meta["adaptive"]) if "adaptive" in meta else AdaptiveSettings(),
         )

@@ -14,7 +14,7 @@ import numpy as np
 
 from studio.segment.classify import PERSON, SHADOW, Thresholds
 
-__all__ = ["binary_scores", "label_scores", "tune_thresholds"]
+__all__ = ["binary_scores", "cdnet_scores", "label_scores", "tune_thresholds"]
 
 log = logging.getLogger(__name__)
 
@@ -48,6 +48,36 @@ def label_scores(pred: Sequence[np.ndarray], truth: Sequence[np.ndarray]) -> dic
         "person": binary_scores([p == PERSON for p in pred], [t == PERSON for t in truth]),
         "shadow": binary_scores([p == SHADOW for p in pred], [t == SHADOW for t in truth]),
     }
+
+
+def cdnet_scores(labels: Sequence[np.ndarray], truths: Sequence[np.ndarray], roi: np.ndarray | None = None,
+                 foreground: int = PERSON, shadow: int | None = SHADOW) -> dict[str, float]:
+    """The CDnet 2014 scores of label images against CDnet ground truth.
+
+    Truth: 0 static, 50 hard shadow, 85 outside the temporal ROI, 170 unknown, 255 motion.
+    Recall / precision / F-measure of ``labels == foreground`` against motion (255) versus static
+    and shadow (0, 50), inside ``roi`` and without 85 / 170; FPR-S is the fraction of shadow
+    pixels (50, inside ``roi``) labelled foreground; shadow precision / recall compare
+    ``labels == shadow`` with the shadow pixels (None: a method without a shadow label).
+    """
+    fg, fg_truth, valid, sh, sh_truth, roi_truths = [], [], [], [], [], []
+    for lab, t in zip(labels, truths):
+        lab, t = np.asarray(lab), np.asarray(t)
+        inside = np.ones(t.shape, bool) if roi is None else np.asarray(roi, bool)
+        fg.append(lab == foreground)
+        fg_truth.append(t == 255)
+        valid.append(inside & (t != 85) & (t != 170))
+        sh.append(lab == shadow if shadow is not None else np.zeros(t.shape, bool))
+        sh_truth.append(t == 50)
+        roi_truths.append(inside & (t == 50))
+    s = binary_scores(fg, fg_truth, valid)
+    shadow_pixels = sum(int(m.sum()) for m in roi_truths)
+    shadow_as_fg = sum(int((f & m).sum()) for f, m in zip(fg, roi_truths))
+    shs = binary_scores(sh, sh_truth, valid)
+    return {"recall": s["recall"], "precision": s["precision"], "f_measure": s["f1"],
+            "fpr_shadow": shadow_as_fg / max(shadow_pixels, 1), "shadow_pixels": shadow_pixels,
+            "shadow_precision": shs["precision"] if shadow is not None else None,
+            "shadow_recall": shs["recall"] if shadow is not None else None}  # fmt: skip
 
 
 def _default_objective(pred, truth) -> float:

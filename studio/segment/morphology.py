@@ -14,7 +14,7 @@ import numpy as np
 from studio.segment.classify import PERSON, SHADOW
 from studio.segment.errors import SegmentationError
 
-__all__ = ["Morphology", "clean_labels", "remove_small_components", "fill_holes", "disk"]
+__all__ = ["Morphology", "clean_labels", "remove_small_components", "fill_holes", "disk", "person_components"]
 
 
 @dataclass(frozen=True)
@@ -128,3 +128,28 @@ def clean_labels(labels: np.ndarray, morphology: Morphology = Morphology()) -> n
     out = nonbg * np.uint8(SHADOW)
     out[person.astype(bool)] = PERSON
     return out
+
+
+def person_components(labels: np.ndarray, keep_largest: bool = False) -> tuple[np.ndarray, dict]:
+    """Quality figures of the person mask, optionally keeping only its largest component.
+
+    Returns ``(labels, figures)``: the labels (person components other than the largest turned
+    to background when ``keep_largest``) and ``{"person_fraction", "components", "clutter"}``:
+    the person's share of the image, its 8-connected components of at least 1 % of the largest,
+    and the share of person pixels outside the largest component (what the fit's quality gates
+    see as disconnected blobs).
+    """
+    person = (labels == PERSON).astype(np.uint8)
+    n, cc, stats, _ = cv2.connectedComponentsWithStats(person, connectivity=8)
+    areas = stats[1:, cv2.CC_STAT_AREA]
+    total = int(areas.sum())
+    if total == 0:
+        return labels, {"person_fraction": 0.0, "components": 0, "clutter": 0.0}
+    largest = int(np.argmax(areas))
+    figures = {"person_fraction": round(total / labels.size, 6),
+               "components": int(np.count_nonzero(areas >= 0.01 * areas[largest])),
+               "clutter": round(1.0 - float(areas[largest]) / total, 6)}  # fmt: skip
+    if keep_largest and n > 2:
+        labels = labels.copy()
+        labels[(cc != largest + 1) & (labels == PERSON)] = 0
+    return labels, figures

@@ -3,7 +3,10 @@
 Output, inside the session folder::
 
     segmentation/
-      segmentation.json             settings, per-camera statistics, timings
+      segmentation.json             settings (with each camera's registration shift), per-camera
+                                    statistics and mask quality (person fraction, components,
+                                    clutter = share of person pixels outside the largest
+                                    component; per frame under ``frame_quality``), timings
       background/<cam>/             background model (mean.exr, std.exr, model.json) — fitted
                                     once from background/<cam>/ and reused
       skin_models/<cam>.npz         per-camera skin model (self-trained unless given)
@@ -12,7 +15,9 @@ Output, inside the session folder::
       overlay/<cam>/NNNNNN.png      quick-look overlay (person blue, shadow red, skin orange)
       floor_votes/NNNNNN.png        shadow votes on the floor, top-down (fig. 5.4), 255 = all views
 
-Per frame: single-view classification + morphology in each camera (§5.5.1), multi-view shadow
+Before the frames: each background model is registered to the session (a camera nudged by a pixel
+since the empty-scene capture: :mod:`studio.segment.registration`). Per frame: single-view
+classification + morphology in each camera (§5.5.1), multi-view shadow
 voting (with the photometric-consistency check of :mod:`studio.segment.voting`) when the session
 has a calibration and ≥ 2 cameras (§5.5.2), then skin inside the person (§6.3.4).
 
@@ -37,7 +42,7 @@ import numpy as np
 from studio.segment.background import BackgroundModel
 from studio.segment.classify import PERSON, SHADOW, Thresholds
 from studio.segment.errors import SegmentationError
-from studio.segment.morphology import Morphology
+from studio.segment.morphology import Morphology, person_components
 from studio.segment.skin import SkinClassifier
 from studio.segment.voting import FloorVotes, ShadowVoter
 
@@ -64,6 +69,9 @@ class SegmentOptions:
     skin_frames: int = 8  # frames per camera for self-training
     overlay_every: int = 1  # 0: no overlays
     floor_resolution: float = 0.02  # metres per cell of the floor vote image
+    register: bool = True  # move each background model onto the session's frames (a nudged camera)
+    largest_component: bool = False  # keep only the largest person component per view
+    hull: bool = False  # drop person components the visual hull of all views does not explain
 
 
 @dataclass(frozen=True)
@@ -94,7 +102,8 @@ def _setup_state(state: dict) -> None:
     _STATE["session"] = Session.open(state["path"])
     _STATE["layout"] = Layout(state["out"], source=state["path"])
     calib = state.get("calibration")
-    _STATE["voter"] = ShadowVoter(calib, state["cameras"]) if calib is not None else None
+    _STATE["voter"] = ShadowVoter(calib, state["cameras"]) if calib is not None and state.get("voting", True) else None
+    _STATE["hull_cameras"] = {c: calib[c] for c in state["cameras"]} if calib is not None and state.get("hull") else None
     grid = state.get("grid")
     _STATE["floor_votes"] = (
         FloorVotes(calib, grid, state["cameras"]) if grid is not None and state["overlay_every"] > 0 else None
@@ -109,13 +118,15 @@ def _load_state(spec: dict) -> dict:
         return _STATE
     ws = Workspace.open(spec["path"], out=spec["out"])
     options = spec["options"]
-    models = {cam: BackgroundModel.load(ws.layout.background_model_dir(cam)).with_settings(
-        options.thresholds, options.morphology) for cam in ws.camera_names}
+    models = {cam: _registered(BackgroundModel.load(ws.layout.background_model_dir(cam)).with_settings(
+        options.thresholds, options.morphology), spec["registration"].get(cam)) for cam in ws.camera_names}
     skin_file = options.skin_model
     skin = {cam: SkinClassifier.load(skin_file if skin_file is not None else ws.layout.skin_model(cam))
             for cam in spec["skin_cameras"]}
-    calib = ws.calibration if spec["voting"] else None
+    calib = ws.calibration if spec["voting"] or spec["hull"] else None
     _setup_state({"path": spec["path"], "out": spec["out"], "cameras": ws.camera_names, "models": models,
+                  "largest_component": bool(options.largest_component), "voting": spec["voting"],
+                  "hull": spec["hull"],
                   "calibration": calib, "overlay_every": int(options.overlay_every), "skin": skin,
                   "grid": _floor_grid(calib, options.floor_resolution) if calib is not None else None})
     _STATE["token"] = spec["token"]
@@ -152,6 +163,17 @@ def _segment_frame(index: int, state: dict) -> tuple[dict, dict, dict]:
     if voter is not None:
         result = voter.vote(labels, ratios)
         labels, relabelled = result.labels, result.relabelled
+    dropped = {}
+    if state.get("hull_cameras"):
+        from studio.segment.hull import hull_filter
+
+        labels, dropped = hull_filter(labels, state["hull_cameras"])
+    quality = {}
+    for cam in state["cameras"]:
+        labels[cam], quality[cam] = person_components(labels[cam], state.get("largest_component", False))
+        if state.get("hull_cameras"):
+            quality[cam]["hull_dropped"] = dropped.get(cam, 0)
+    state["last_quality"] = quality
     return frame, labels, relabelled
 
 
@@ -183,7 +205,7 @@ def _process_frame(index: int) -> dict:
     for cam in state["cameras"]:
         write_image(lay.labels(cam, index), labels[cam], compression=1)
     fractions = {cam: _fractions(labels[cam]) for cam in state["cameras"]}
-    return {"index": index, "fractions": fractions, "relabelled": relabelled}
+    return {"index": index, "fractions": fractions, "relabelled": relabelled, "quality": state["last_quality"]}
 
 
 # ---------------------------------------------------------------------- preparation
@@ -213,6 +235,29 @@ def _background_model(ws, cam: str, options: SegmentOptions) -> BackgroundModel:
             f"frames are {w}x{h} (refit it with --refit-background)"
         )
     return model
+
+
+def _registered(model: BackgroundModel, shift) -> BackgroundModel:
+    return model if not shift or (shift[0] == 0 and shift[1] == 0) else model.shifted(*shift)
+
+
+def _registration(ws, models: dict, frames: list[int], options: SegmentOptions, count: int = 5) -> dict:
+    """Per camera ``[dx, dy]`` by which the session's frames are moved against the empty scene
+    (median over ``count`` frames spread over the session, to 0.1 px; shifts under 0.25 px are
+    noise: 0)."""
+    if not options.register:
+        return {}
+    sample = sorted({frames[int(i)] for i in np.linspace(0, len(frames) - 1, min(count, len(frames))).round()})
+    images = [ws.session.frame(i) for i in sample]
+    out = {}
+    for cam, model in models.items():
+        dx, dy = model.estimate_shift([im[cam] for im in images])
+        # to 0.1 px: a rerun on another selection of frames keeps the same settings (and its frames)
+        out[cam] = [round(dx, 1), round(dy, 1)] if np.hypot(dx, dy) >= 0.25 else [0.0, 0.0]
+        if out[cam] != [0.0, 0.0]:
+            log.info("camera %s: frames moved by (%.2f, %.2f) px against the empty scene: model registered",
+                     cam, *out[cam])
+    return out
 
 
 def _floor_grid(calib, resolution: float):
@@ -273,7 +318,7 @@ def _open(source, out=None):
         raise SegmentationError(str(exc)) from None
 
 
-def _settings(models: dict, options: SegmentOptions, voting: bool, skin_cameras) -> dict:
+def _settings(models: dict, options: SegmentOptions, voting: bool, skin_cameras, registration: dict) -> dict:
     """What decides a frame's outputs: a frame done with other settings is done again."""
     first = next(iter(models.values()))
     return {
@@ -285,6 +330,9 @@ def _settings(models: dict, options: SegmentOptions, voting: bool, skin_cameras)
         "skin_model": None if options.skin_model is None else str(options.skin_model),
         "overlay_every": int(options.overlay_every),
         "floor_resolution": float(options.floor_resolution),
+        "registration": registration,
+        "largest_component": bool(options.largest_component),
+        "hull": bool(options.hull),
     }
 
 
@@ -341,9 +389,14 @@ def segment_session(
     except WorkspaceError as exc:
         raise SegmentationError(str(exc)) from None
     models = {cam: _background_model(ws, cam, options) for cam in cameras}
+    registration = _registration(ws, models, frames, options)
+    models = {cam: _registered(m, registration.get(cam)) for cam, m in models.items()}
     voting = options.voting and len(cameras) >= 2
+    hull = options.hull and len(cameras) >= 2
     try:
         calib = ws.require_calibration("multi-view shadow voting (or segment with --no-voting)") if voting else None
+        if hull and calib is None:
+            calib = ws.require_calibration("the visual-hull check of the masks (--hull)")
     except WorkspaceError as exc:
         raise SegmentationError(str(exc)) from None
     state = {
@@ -352,17 +405,20 @@ def segment_session(
         "cameras": cameras,
         "models": models,
         "calibration": calib,
+        "voting": voting,
+        "hull": hull,
         "overlay_every": int(options.overlay_every),
         "grid": _floor_grid(calib, options.floor_resolution) if calib is not None else None,
         "skin": {},
+        "largest_component": bool(options.largest_component),
     }
     _setup_state(state)
     state["skin"] = _skin_models(ws, _STATE, frames, options)
     # workers elsewhere read a given skin model by its absolute path
     unit_options = options if options.skin_model is None else replace(options, skin_model=Path(options.skin_model).resolve())
     spec = {"token": uuid.uuid4().hex, "path": str(ws.path), "out": str(ws.layout.root), "options": unit_options,
-            "voting": voting, "skin_cameras": sorted(state["skin"])}
-    settings = _settings(models, options, voting, state["skin"])
+            "voting": voting, "hull": hull, "skin_cameras": sorted(state["skin"]), "registration": registration}
+    settings = _settings(models, options, voting, state["skin"], registration)
     skipped = [] if force else _done_frames(ws, frames, settings)
     todo = [i for i in frames if i not in set(skipped)]
     summary = {
@@ -388,8 +444,11 @@ def segment_session(
     if options.overlay_every > 0 and state["grid"] is not None:
         ws.layout.floor_votes(0).parent.mkdir(parents=True, exist_ok=True)
 
-    results = [{"index": i, "relabelled": {},
-                "fractions": {c: _fractions(read_image(ws.layout.labels(c, i))) for c in cameras}} for i in skipped]
+    results = []
+    for i in skipped:
+        stored = {c: read_image(ws.layout.labels(c, i)) for c in cameras}
+        results.append({"index": i, "relabelled": {}, "fractions": {c: _fractions(v) for c, v in stored.items()},
+                        "quality": {c: person_components(v)[1] for c, v in stored.items()}})
     total = len(frames)
     if skipped:
         log.info("%d of %d frame(s) already segmented with the same settings: skipped (--force redoes them)",
@@ -409,8 +468,12 @@ def segment_session(
         for cam in cameras
     }
     relabelled = {cam: int(sum(r["relabelled"].get(cam, 0) for r in results)) for cam in cameras}
+    quality = {cam: {"person_fraction_mean": float(np.mean([r["quality"][cam]["person_fraction"] for r in results])),
+                     "clutter_mean": float(np.mean([r["quality"][cam]["clutter"] for r in results])),
+                     "clutter_max": float(np.max([r["quality"][cam]["clutter"] for r in results]))} for cam in cameras}
     summary.update(status="complete", skipped=skipped, mean_fractions=fractions, relabelled_by_voting=relabelled,
-                   seconds=round(seconds, 3))
+                   seconds=round(seconds, 3), quality=quality,
+                   frame_quality={str(r["index"]): r["quality"] for r in sorted(results, key=lambda r: r["index"])})
     atomic_write_json(ws.layout.segmentation_summary, summary, fsync=False)
     return SegmentationSummary(
         path=ws.layout.root,

@@ -144,3 +144,54 @@ def test_cli_with_a_trained_skin_model_and_a_frame_list(fresh, tmp_path):
     pred = read_image(fresh / "segmentation" / "skin" / "cam0" / "000002.png") > 0
     assert (pred & truth).sum() > 0.7 * truth.sum()
     assert not (fresh / "segmentation" / "skin" / "cam0" / "000001.png").exists()
+
+
+def test_a_nudged_camera_is_registered_and_mask_quality_is_written(fresh):
+    """cam1's empty scene captured 1.5 px left / 1 px down of where the session was filmed:
+    registration measures the shift and gives back the clean masks; quality figures are written."""
+    from rigs.imageio import write_image
+    from studio.segment.registration import shift_image
+
+    for path in sorted((fresh / "background" / "cam1").glob("*.png")):
+        write_image(path, shift_image(read_image(path), -1.5, 1.0))
+    truth = _labels(fresh, ["cam1"], [0, 1, 2], "labels")
+    scores = {}
+    for register in (False, True):
+        segment_session(fresh, SegmentOptions(overlay_every=0, skin=False, register=register, refit_background=True))
+        scores[register] = label_scores(_labels(fresh, ["cam1"], [0, 1, 2]), truth)["person"]
+    meta = json.loads((fresh / "segmentation" / "segmentation.json").read_text())
+    dx, dy = meta["settings"]["registration"]["cam1"]
+    assert dx == pytest.approx(1.5, abs=0.2) and dy == pytest.approx(-1.0, abs=0.2)
+    assert meta["settings"]["registration"]["cam0"] == [0.0, 0.0]
+    assert scores[True]["precision"] > scores[False]["precision"] + 0.05, scores
+    assert scores[True]["f1"] > 0.9
+    q = meta["quality"]["cam1"]
+    assert 0.01 < q["person_fraction_mean"] < 0.5 and 0.0 <= q["clutter_mean"] <= q["clutter_max"] < 0.2
+    assert set(meta["frame_quality"]) == {"0", "1", "2"}
+    assert meta["frame_quality"]["1"]["cam0"]["components"] >= 1
+
+
+def test_hull_check_drops_clutter_one_view_alone_sees(fresh):
+    """A bright patch painted into cam0's frames (a lamp, a moved tripod) is person in cam0 only;
+    the visual hull of the three views does not explain it and --hull drops it, the person stays."""
+    from rigs.imageio import write_image
+
+    for path in sorted((fresh / "frames" / "cam0").glob("*.png")):
+        img = read_image(path)
+        img[2:12, 2:14] = (250, 20, 200)
+        write_image(path, img)
+    truth = _labels(fresh, ["cam0"], [0, 1, 2], "labels")
+    runs = {}
+    for hull in (False, True):
+        assert main(["segment", str(fresh), "--no-skin", "--overlay-every", "0"] + (["--hull"] if hull else [])) == 0
+        meta = json.loads((fresh / "segmentation" / "segmentation.json").read_text())
+        runs[hull] = (label_scores(_labels(fresh, ["cam0"], [0, 1, 2]), truth)["person"], meta)
+    plain, checked = runs[False][0], runs[True][0]
+    assert all(_labels(fresh, ["cam0"], [i])[0][2:12, 2:14].mean() == 0 for i in (0, 1, 2))
+    assert checked["precision"] > plain["precision"] + 0.02 and checked["recall"] >= plain["recall"] - 0.01
+    q_plain, q_checked = runs[False][1]["frame_quality"]["1"]["cam0"], runs[True][1]["frame_quality"]["1"]["cam0"]
+    assert q_plain["components"] == 2 and q_plain["clutter"] > 0.05
+    assert q_checked["components"] == 1 and q_checked["clutter"] == 0 and q_checked["hull_dropped"] >= 100
+    assert runs[True][1]["settings"]["hull"] is True
+    # the other views keep their person whole
+    assert runs[True][1]["frame_quality"]["1"]["cam1"]["hull_dropped"] == 0

@@ -34,6 +34,13 @@ def register(subparsers) -> None:
                    help="a trained skin model (.npz) to use for every camera instead of self-training")  # fmt: skip
     p.add_argument("--overlay-every", type=int, default=1,
                    help="write quick-look overlays for every N-th frame (0: none; default 1)")  # fmt: skip
+    p.add_argument("--no-register", action="store_true",
+                   help="do not move the background models onto the frames (default: a camera nudged since the "
+                        "empty-scene capture is measured by phase correlation and compensated)")  # fmt: skip
+    p.add_argument("--largest-component", action="store_true",
+                   help="keep only the largest person component per view (clutter is reported either way)")
+    p.add_argument("--hull", action="store_true",
+                   help="drop person components the visual hull of all views does not explain (needs the calibration)")
     p.add_argument("--t-hsv", type=float, default=None, help="eq. 5.5 background threshold t^HSV")
     p.add_argument("--t-s", type=float, default=None, help="eq. 5.5 saturation threshold t^S")
     p.add_argument("--force", action="store_true",
@@ -71,6 +78,9 @@ def run(args) -> int:
         skin=not args.no_skin,
         skin_model=args.skin_model,
         overlay_every=max(0, args.overlay_every),
+        register=not args.no_register,
+        largest_component=args.largest_component,
+        hull=args.hull,
     )
     total = len(frames) if frames is not None else len(ws.frame_indices)
     with Progress(

@@ -98,6 +98,30 @@ def test_person_half_outside_the_image_is_flagged(scene):
     assert _views(s, "border") == {"cam0"}
 
 
+def test_agreement_gate_at_its_threshold(scene):
+    """The true body against its masks grown by k pixels: recall = |body| / |grown mask|,
+    counted here independently; the gate says suspect exactly when that is below
+    AGREEMENT[0] (0.93) and failed below AGREEMENT[1]."""
+    import cv2
+
+    from studio.fit.quality import AGREEMENT
+
+    model, cams, shape, pose, V, masks = scene
+    sils = [silhouette(c, V, model.faces) for c in cams]
+    costs = {"silhouette_per_view": {c.name: 0.1 for c in cams}}
+    seen = set()
+    for k in (0, 1, 2, 3, 4, 6, 12):
+        grown = [cv2.dilate(m.astype(np.uint8), np.ones((2 * k + 1, 2 * k + 1), np.uint8)) > 0 for m in masks]
+        recall = sum(int((s & g).sum()) for s, g in zip(sils, grown)) / sum(int(g.sum()) for g in grown)
+        q = fit_quality(model, cams, grown, shape, pose, costs, screen_masks(cams, grown))
+        assert q["silhouette_recall"] == pytest.approx(recall, abs=1e-4)
+        want = "failed" if recall < AGREEMENT[1] else "suspect" if recall < AGREEMENT[0] else None
+        got = next((r["severity"] for r in q["reasons"] if r["check"] == "agreement"), None)
+        assert got == want, (k, recall, q["reasons"])
+        seen.add(want)
+    assert seen == {None, "suspect", "failed"}  # both sides of both thresholds were crossed
+
+
 def test_stray_blobs_are_flagged(scene):
     model, cams, shape, pose, V, masks = scene
     blobs = list(masks)

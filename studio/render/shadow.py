@@ -21,7 +21,7 @@ import numpy as np
 from studio.render.lights import DirectionalLight, PointLight
 from studio.render.raster import front_facing, silhouette
 
-__all__ = ["fill_outlines", "light_facing", "shadow_mask", "shadow_outline", "shadow_silhouettes", "shadow_vertices"]
+__all__ = ["fill_outlines", "join_outlines", "light_facing", "shadow_mask", "shadow_outline", "shadow_silhouettes", "shadow_vertices"]
 
 
 def _plane(ground) -> tuple[np.ndarray, float]:
@@ -96,13 +96,15 @@ def light_facing(normals: np.ndarray, na: np.ndarray, sign: float, light) -> np.
 
 
 def shadow_outline(vertices: np.ndarray, faces: np.ndarray, light, ground=None, *,
-                   normals: tuple | None = None) -> tuple[np.ndarray, np.ndarray] | None:
+                   normals: tuple | None = None, topology=None) -> tuple[np.ndarray, np.ndarray, np.ndarray] | None:
     """The directed outline of the shadow of a closed mesh on the ground (eq. 5.2).
 
-    Returns (start (E, 3), end (E, 3)) plane points of the light's occluding contour, each edge
-    directed as in its light-facing face, so that the winding number of the outline around a
-    floor point counts the light-facing faces whose shadow covers it. ``normals`` may pass
-    :func:`studio.render.spans.face_normals` of the mesh (computed once for many lights).
+    Returns ``points`` (U, 3) on the plane (the shadows of the light's occluding-contour
+    vertices) and ``start``, ``end`` (E,) indices into them: each contour edge directed as in its
+    light-facing face, so that the winding number of the outline around a floor point counts the
+    light-facing faces whose shadow covers it. ``normals`` may pass
+    :func:`studio.render.spans.face_normals` of the mesh and ``topology`` its
+    ``studio.render.spans._topology`` (computed once for many lights).
     None when the fast path does not apply (an open or inconsistently wound mesh, a contour
     vertex at or above a point light's height, a light shining upwards): use
     :func:`shadow_mask`.
@@ -112,7 +114,7 @@ def shadow_outline(vertices: np.ndarray, faces: np.ndarray, light, ground=None, 
 
     V = np.asarray(vertices, dtype=np.float64)
     F = np.asarray(faces, dtype=np.int64)
-    topo = _topology(F, len(V))
+    topo = _topology(F, len(V)) if topology is None else topology
     if topo is None:
         return None
     n, na, sign = face_normals(V, F) if normals is None else normals
@@ -123,9 +125,9 @@ def shadow_outline(vertices: np.ndarray, faces: np.ndarray, light, ground=None, 
         valid = np.ones(len(used), bool) if float(_plane(ground)[0] @ light.direction) < -1e-12 else valid
     if not valid.all():
         return None
-    pos = np.empty((len(V), 3))
-    pos[used] = S
-    return pos[u], pos[v]
+    index = np.empty(len(V), dtype=np.int64)
+    index[used] = np.arange(len(used))
+    return S, index[u], index[v]
 
 
 def shadow_silhouettes(cameras, vertices: np.ndarray, faces: np.ndarray, lights, ground=None, *,
@@ -134,15 +136,11 @@ def shadow_silhouettes(cameras, vertices: np.ndarray, faces: np.ndarray, lights,
     light or a sequence) of the floor shadows (eqs. 5.2-5.3, several lights §5.4.2); same
     masks as :func:`shadow_mask` (with which it falls back when the outline fast path does
     not apply). The person's occlusion of its own shadow is the caller's business."""
-    from studio.render.winding import winding_fill
-
     lights = [lights] if isinstance(lights, (PointLight, DirectionalLight)) else list(lights)
     outlines = [shadow_outline(vertices, faces, light, ground, normals=normals) for light in lights]
     out = []
     for cam in cameras:
-        m = None
-        if all(o is not None for o in outlines):
-            m = fill_outlines(cam, [o[0] for o in outlines], [o[1] for o in outlines], winding_fill)
+        m = fill_outlines(cam, outlines) if all(o is not None for o in outlines) else None
         if m is None:  # the exact path
             m = np.zeros((cam.size[1], cam.size[0]), bool)
             for light in lights:
@@ -151,15 +149,31 @@ def shadow_silhouettes(cameras, vertices: np.ndarray, faces: np.ndarray, lights,
     return out
 
 
-def fill_outlines(camera, starts, ends, fill) -> np.ndarray | None:
-    """(H, W) bool pixels of ``camera`` inside the outlines (lists of (E, 3) start / end plane
-    points), filled by winding number with the compiled ``fill``; None when a point lies behind
+def join_outlines(outlines) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """One outline (points, start, end) of several (:func:`shadow_outline`): their union."""
+    points, starts, ends, k = [], [], [], 0
+    for P, a, b in outlines:
+        points.append(P)
+        starts.append(a + k)
+        ends.append(b + k)
+        k += len(P)
+    if not points:
+        z = np.zeros(0, np.int64)
+        return np.zeros((0, 3)), z, z
+    return np.concatenate(points), np.concatenate(starts), np.concatenate(ends)
+
+
+def fill_outlines(camera, outlines) -> np.ndarray | None:
+    """(H, W) bool pixels of ``camera`` inside the union of ``outlines`` (each (points, start,
+    end) of :func:`shadow_outline`), filled by winding number; None when a point lies behind
     the camera."""
+    from studio.render.winding import winding_fill
+
     w, h = camera.size
-    P = np.concatenate(starts) if starts else np.zeros((0, 3))
-    if len(P) == 0:
+    P, a, b = join_outlines(outlines)
+    if len(a) == 0:
         return np.zeros((h, w), bool)
-    uv, depth, _ = camera.project_points(np.concatenate([P, *ends]))
+    uv, depth, _ = camera.project_points(P)
     if depth.min() <= 1e-3:
         return None
-    return fill(uv[: len(P)], uv[len(P):], w, h)
+    return winding_fill(uv[a], uv[b], w, h)

@@ -95,9 +95,8 @@ def predicted_shadows(frame: ShadowFrame, cameras: Sequence, lights, ground=None
         elif fast and uvw[k, :, 2].min() > 1e-3:
             uv = uvw[k, :, :2] / uvw[k, :, 2:]
             m = winding_fill(uv[a], uv[b], cam.size[0], cam.size[1])
-        if m is None:
-            m = shadow_silhouettes([cam], frame.vertices, frame.faces, lights, ground)[0]
-        out.append(m & ~occ)
+        out.append(m & ~occ if m is not None else
+                   shadow_silhouettes([cam], frame.vertices, frame.faces, lights, ground, occluders=[occ])[0])
     return out
 
 

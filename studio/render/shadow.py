@@ -131,21 +131,23 @@ def shadow_outline(vertices: np.ndarray, faces: np.ndarray, light, ground=None, 
 
 
 def shadow_silhouettes(cameras, vertices: np.ndarray, faces: np.ndarray, lights, ground=None, *,
-                       normals: tuple | None = None) -> list[np.ndarray]:
+                       normals: tuple | None = None, topology=None, occluders=None) -> list[np.ndarray]:
     """(H_k, W_k) bool shadow of a closed mesh in each camera: the union over ``lights`` (a
     light or a sequence) of the floor shadows (eqs. 5.2-5.3, several lights §5.4.2); same
     masks as :func:`shadow_mask` (with which it falls back when the outline fast path does
-    not apply). The person's occlusion of its own shadow is the caller's business."""
+    not apply). ``occluders`` (per camera (H_k, W_k) bool, e.g. the body's own silhouette) are
+    taken out: the visible shadow (thesis §5.6, shadows first, then the body)."""
     lights = [lights] if isinstance(lights, (PointLight, DirectionalLight)) else list(lights)
-    outlines = [shadow_outline(vertices, faces, light, ground, normals=normals) for light in lights]
+    outlines = [shadow_outline(vertices, faces, light, ground, normals=normals, topology=topology)
+                for light in lights]
     out = []
-    for cam in cameras:
+    for k, cam in enumerate(cameras):
         m = fill_outlines(cam, outlines) if all(o is not None for o in outlines) else None
         if m is None:  # the exact path
             m = np.zeros((cam.size[1], cam.size[0]), bool)
             for light in lights:
                 m |= shadow_mask(cam, vertices, faces, light, ground)
-        out.append(m)
+        out.append(m if occluders is None else m & ~occluders[k])
     return out
 
 

@@ -102,3 +102,47 @@ def test_cli_light_writes_light_json_and_refuses_no_shadow(tmp_path, capsys):
     assert not (tmp_path / "dark" / "light" / "light.json").exists()
     with pytest.raises(LightError, match=r"no light estimated"):
         load_light(tmp_path / "dark" / "light" / "light.json")
+
+
+def test_bad_inputs_are_named(tmp_path, bodies):
+    from studio.light import ShadowObjective
+    from studio.light.session import estimate_session_light, session_bodies, session_shadows
+    from studio.workspace import Workspace
+
+    with pytest.raises(ValueError, match=r"frames: at least one frame is needed"):
+        ShadowObjective([], CAMS)
+    with pytest.raises(LightError, match=r"lights: expected 1 or 2, got 3"):
+        estimate_light(bodies, CAMS, _masks(bodies, []), n_lights=3)
+    lightkit.make_session(tmp_path / "s", [PointLight([1.2, 1.3, 3.4])], n_frames=2)
+    ws = Workspace.open(tmp_path / "s")
+    with pytest.raises(LightError, match=r"bodies: expected one of \('fit', 'truth'\), got 'x'"):
+        session_bodies(ws, [0], "x")
+    with pytest.raises(LightError, match=r"shadows: expected 'segmentation' or 'truth', got 'x'"):
+        session_shadows(ws, [0], "x")
+    with pytest.raises(LightError, match=r"no true labels — --shadows truth needs a simulated session"):
+        session_shadows(ws, [0], "truth")
+    with pytest.raises(LightError, match=r"no fit/ folder — run `studio fit"):
+        estimate_session_light(ws)
+    with pytest.raises(LightError, match=r"no fitted frames — run `studio fit"):
+        (tmp_path / "s" / "fit").mkdir()
+        session_bodies(ws, [0], "fit")
+    (tmp_path / "s" / "truth" / "faces.npy").unlink()
+    with pytest.raises(LightError, match=r"no true bodies — --bodies truth needs a simulated session"):
+        session_bodies(ws, [0], "truth")
+    bad = tmp_path / "light.json"
+    bad.write_text("{")
+    with pytest.raises(LightError, match=r"not JSON"):
+        load_light(bad)
+    bad.write_text(json.dumps({"format": "other"}))
+    with pytest.raises(LightError, match=r"not a studio.light version 1 file"):
+        load_light(bad)
+    bad.write_text(json.dumps({"format": "studio.light", "version": 1, "lights": [{"kind": "spot"}]}))
+    with pytest.raises(LightError, match=r"lights\[0\].kind': expected 'point' or 'directional', got 'spot'"):
+        load_light(bad)
+    bad.write_text(json.dumps({"format": "studio.light", "version": 1, "lights": []}))
+    with pytest.raises(LightError, match=r"field 'lights': expected at least one light"):
+        load_light(bad)
+    bad.write_text(json.dumps({"format": "studio.light", "version": 1,
+                               "lights": [{"kind": "directional", "direction": [0.0, 0.6, 0.8]}]}))
+    lights, _ = load_light(bad)
+    np.testing.assert_allclose(lights[0].direction, [0.0, -0.6, -0.8])

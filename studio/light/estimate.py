@@ -39,6 +39,8 @@ MIN_SHADOW_PIXELS = 150
 MIN_SHADOW_FRAMES = 2
 #: Refuse a light whose cost is above this fraction of the no-shadow cost.
 MAX_UNEXPLAINED = 0.5
+#: At most this many posterior samples are stored in light.json (thinned evenly), for the figures.
+MAX_STORED_SAMPLES = 400
 #: Give up after the coarse grid when its best costs more than this fraction of no shadow.
 HOPELESS = 0.8
 
@@ -101,6 +103,7 @@ class LightEstimate:
                 "chain_over_autocorr": float((post.n_steps - post.burn) / max(float(np.max(post.autocorr)), 1.0)),
                 "temperature": post.temperature,
             },
+            "samples": np.round(post.samples[:: max(1, len(post.samples) // MAX_STORED_SAMPLES)], 6).tolist(),
             "frames": self.frames,
             "n_evaluations": self.n_evaluations,
             "timings": {k: round(v, 3) for k, v in self.timings.items()},

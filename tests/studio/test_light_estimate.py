@@ -95,6 +95,20 @@ def test_cli_light_writes_light_json_and_refuses_no_shadow(tmp_path, capsys):
     assert {"direction_ci_deg", "distance_ci", "samples_summary", "timings", "direction"} <= set(out)
     lights, _ = load_light(tmp_path / "lit" / "light" / "light.json")
     assert isinstance(lights[0], PointLight)
+    assert len(out["samples"]) == out["samples_summary"]["n_samples"] and len(out["samples"][0]) == 3
+    from studio.light.figures import posterior_figure, top_view_figure
+    from studio.report.html import _light_html
+
+    corner = posterior_figure(out)
+    assert len(corner.axes) == 9 and corner.axes[0].patches  # 3 × 3, histograms on the diagonal
+    top = top_view_figure(out, {"cam0": [3.0, 1.0, 2.4]})
+    assert len(top.axes[0].lines) >= 4  # camera, subject, samples, light
+    import matplotlib.pyplot as plt
+
+    plt.close(corner)
+    plt.close(top)
+    html = _light_html(out, None)
+    assert html.count("data:image/png;base64") == 2 and "light 1: point" in html
     assert "light 1: point" in capsys.readouterr().out
     lightkit.make_session(tmp_path / "dark", [], n_frames=3)
     assert main(["light", str(tmp_path / "dark"), "--bodies", "truth", "--workers", "1"]) == 1

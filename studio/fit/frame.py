@@ -274,6 +274,10 @@ def fit_frame(
     options: FitOptions = FitOptions(),
     seed=0,
     screen: dict | None = None,
+    lights=None,
+    shadow_masks=None,
+    shadow_weight: float = 1.0,
+    ground=None,
 ) -> FrameFit:
     """Fit ``model`` to one frame's observed silhouettes.
 
@@ -288,6 +292,11 @@ def fit_frame(
     computed when None): views with an empty or all-image mask are left out, and a frame with
     fewer than two usable views raises :class:`~studio.fit.errors.UnusableFrame`. The result
     carries the quality gates (:attr:`FrameFit.quality`).
+
+    With ``lights`` (known point / directional lights) and ``shadow_masks`` (observed shadows,
+    (H, W) bool per camera), the cost gains the shadow term of eq. 5.7 (weight
+    ``shadow_weight``, cast on ``ground``; :class:`studio.fit.shadows.ShadowTerm`), reported as
+    ``costs["shadow"]``.
     """
     cameras = list(cameras)
     masks = [np.asarray(m, dtype=bool) for m in masks]
@@ -301,6 +310,14 @@ def fit_frame(
         raise UnusableFrame(frame, refused_quality(screen))
     used = [i for i, c in enumerate(cameras) if c.name not in screen["dropped"]]
     cameras, masks = [cameras[i] for i in used], [masks[i] for i in used]
+    shadow = None
+    if lights:
+        from studio.fit.shadows import ShadowTerm
+
+        if shadow_masks is None or len(shadow_masks) != len(used) + len(screen["dropped"]):
+            raise FitError("shadow_masks: one observed shadow mask per camera is needed with lights")
+        shadow = ShadowTerm.build(lights, [shadow_masks[i] for i in used], [c.name for c in cameras], options.levels,
+                                  tau=options.tau, xi=options.xi, ground=ground, weight=shadow_weight)
     rng = np.random.default_rng(seed)
     t_start, cpu_start = time.perf_counter(), time.process_time()
     timings = {}
@@ -325,10 +342,10 @@ def fit_frame(
     targets = build_targets(masks, [c.name for c in cameras], options)
     n_free = options.n_shape_free if options.fit_shape else 0
     n_free = min(n_free, model.n_shape)
-    pose_obj = FrameObjective(model, cameras, targets, base_shape, 0, options.prior_weight)
+    pose_obj = FrameObjective(model, cameras, targets, base_shape, 0, options.prior_weight, shadow=shadow)
     # the global search scores the 15-cone model (§4.8.1) by default; the heading grid, the
     # check of the cones' answer and the partitioned passes score SCAPE
-    apf_obj = (CylinderObjective(model, cameras, targets, base_shape, 0, options.prior_weight)
+    apf_obj = (CylinderObjective(model, cameras, targets, base_shape, 0, options.prior_weight, shadow=shadow)
                if options.search_model == "cylinder" else pose_obj)
     timings["targets"] = time.perf_counter() - t_start
 
@@ -403,7 +420,7 @@ def fit_frame(
 
     # -- staged Nelder–Mead on pose + shape
     t = time.perf_counter()
-    obj = FrameObjective(model, cameras, targets, base_shape, n_free, options.prior_weight)
+    obj = FrameObjective(model, cameras, targets, base_shape, n_free, options.prior_weight, shadow=shadow)
     x0 = obj.pack(base_shape, x_pose)
     sig = np.sqrt(model.eigenvalues[:n_free])
     blo = np.concatenate([lo, -3 * sig])

@@ -42,7 +42,8 @@ class FrameObjective:
     ``cameras`` full-resolution cameras in ``targets[level].names`` order; ``targets``
     {level: SilhouetteTarget}; ``base_shape`` (n_shape,) the shape whose first
     ``n_shape_free`` coefficients ``x`` replaces; ``prior_weight`` multiplies the shape
-    prior (eq. 6.8) and the joint-limit penalty (eq. 6.9, first term).
+    prior (eq. 6.8) and the joint-limit penalty (eq. 6.9, first term); ``shadow`` (a
+    :class:`studio.fit.shadows.ShadowTerm`, optional) adds the shadow term of eq. 5.7.
     """
 
     model: object
@@ -52,6 +53,7 @@ class FrameObjective:
     n_shape_free: int = 0
     prior_weight: float = 1.0
     n_evaluations: int = 0
+    shadow: object = None
 
     def __post_init__(self):
         self.base_shape = np.asarray(self.base_shape, dtype=np.float64)
@@ -107,7 +109,10 @@ class FrameObjective:
         sp, lp = self.priors(X)
         out = np.empty(len(X))
         for i, v in enumerate(V):
-            out[i] = silhouette_cost(target, self.masks(v, level)).total
+            masks = self.masks(v, level)
+            out[i] = silhouette_cost(target, masks).total
+            if self.shadow is not None:  # eq. 5.7
+                out[i] += self.shadow.cost(self._level_cams[level], v, self.faces, masks, level)
         self.n_evaluations += len(X)
         return out + self.prior_weight * (sp + lp)
 
@@ -119,9 +124,10 @@ class FrameObjective:
         """Term-by-term costs of one parameter vector (for the results file)."""
         x = np.asarray(x, dtype=np.float64)
         V = self.meshes(x[None])[0]
-        sc = silhouette_cost(self.targets[level], self.masks(V, level))
+        masks = self.masks(V, level)
+        sc = silhouette_cost(self.targets[level], masks)
         sp, lp = self.priors(x[None])
-        return {
+        out = {
             "silhouette": float(sc.total),
             "silhouette_per_view": {n: float(a + b) for n, a, b in zip(sc.names, sc.model_to_observed, sc.observed_to_model)},
             "shape_prior": float(sp[0]),
@@ -129,6 +135,13 @@ class FrameObjective:
             "total": float(sc.total + self.prior_weight * (sp[0] + lp[0])),
             "level": int(level),
         }
+        if self.shadow is not None:  # eq. 5.7: the shadow views averaged, with their own weight
+            per = self.shadow.per_view(self._level_cams[level], V, self.faces, masks, level)
+            out["shadow"] = float(self.shadow.weight * np.mean(per))
+            out["shadow_per_view"] = {n: float(v) for n, v in zip(sc.names, per)}
+            out["shadow_weight"] = self.shadow.weight
+            out["total"] += out["shadow"]
+        return out
 
 
 @dataclass

@@ -117,13 +117,15 @@ def fit_session(
     progress: Callable[[int, int], None] | None = None,
     force: bool = False,
     out=None,
+    shadows: float | None = None,
 ) -> dict:
     """Fit ``frames`` (default all) of a session (a :class:`~studio.workspace.Workspace` or a
     folder; outputs to ``out``, default the session); returns the summary dict (also written
     to ``fit/sequence.json``). Frames fitted before with the same settings are kept unless
     ``force``. ``workers`` local processes, or the Dask cluster ``scheduler`` (see
     :func:`studio.execution.open_runner`); ``chain_length`` the longest chain of tracked frames
-    (:func:`plan_chains`; part of the settings a rerun compares)."""
+    (:func:`plan_chains`; part of the settings a rerun compares). ``shadows`` (a weight) adds the
+    shadow term of eq. 5.7 with the light of ``light/light.json`` (:func:`studio.light.load_light`)."""
     from rigs.atomic import atomic_write_json
     from studio.body import GENDERS
     from studio.execution import ExecutionError, open_runner, run_chains
@@ -150,6 +152,14 @@ def fit_session(
     plan = plan_chains(frames, chain_length)
     if len(plan) > 1:  # recorded only when it splits: results of one chain keep their old settings
         run["chains"] = plan
+    if shadows is not None:
+        from studio.light import LightError, load_light
+
+        try:
+            _, light = load_light(ws.layout.light_json)
+        except LightError as exc:
+            raise FitError(str(exc)) from None
+        run["shadows"] = {"weight": float(shadows), "lights": light["lights"]}
     kept = [] if force else [f for f in frames if stored_fit(ws.layout, f, run) is not None]
     if force:  # a frame's JSON marks it complete: gone, so that every unit fits again
         for f in frames:
@@ -159,6 +169,8 @@ def fit_session(
                  len(kept), total)
     spec = {"path": str(ws.path), "out": str(ws.layout.root), "gender": gender, "options": options.to_dict(),
             "seed": int(seed), "run": run}
+    if shadows is not None:
+        spec["shadows"] = {"weight": float(shadows)}
     try:
         with open_runner(min(workers, len(plan)), scheduler) as runner:
             todo = [list(c) for c in plan]

@@ -98,12 +98,28 @@ def _images(ws, frame: int):
         return None
 
 
+def _shadow_inputs(ws, frame: int, shadows: dict | None) -> dict:
+    """fit_frame's shadow arguments (eq. 5.7) when the spec asks for the shadow term: the lights of
+    ``light/light.json``, the frame's segmented shadows (label 2), the calibrated ground."""
+    if not shadows:
+        return {}
+    from studio.light import LightError, load_light
+
+    try:
+        lights, _ = load_light(ws.layout.light_json)
+    except LightError as exc:
+        raise FitError(str(exc)) from None
+    return {"lights": lights, "shadow_masks": [ws.labels(c, frame) == 2 for c in ws.camera_names],
+            "shadow_weight": float(shadows.get("weight", 1.0)), "ground": getattr(ws.calibration, "ground", None)}
+
+
 def fit_unit(spec: dict, frame: int, previous: dict | None) -> dict:
     """Fit ``frame`` of the session ``spec`` names (or take its stored result); the chain state.
 
     ``spec``: ``path``, ``out`` (session and output folders), ``gender`` (a model, or "auto" for
     a chain's first frame only), ``options`` (:meth:`FitOptions.to_dict`), ``seed``, ``run``
-    (the settings recorded in every result). ``previous``: the chain state of the frame before.
+    (the settings recorded in every result), optionally ``shadows`` ({"weight": w}: the shadow
+    term of eq. 5.7 with the light of ``light/light.json``). ``previous``: the chain state of the frame before.
     """
     from studio.fit.frame import FitOptions
     from studio.fit.output import write_frame_fit, write_unfitted
@@ -125,22 +141,24 @@ def fit_unit(spec: dict, frame: int, previous: dict | None) -> dict:
     pose = None if prev.get("pose") is None else np.asarray(prev["pose"], float)
     gender = prev.get("gender") or spec["gender"]
     screen = screen_masks(cameras, masks)
+    extra = _shadow_inputs(ws, frame, spec.get("shadows"))
     try:
         if pose is None:  # the chain's first fitted frame: from the silhouettes, shape free
-            fit = fit_frame_gender(cameras, masks, gender, frame=frame, options=options, seed=seed, screen=screen)
+            fit = fit_frame_gender(cameras, masks, gender, frame=frame, options=options, seed=seed, screen=screen,
+                                   **extra)
         else:
             model = _model(gender)
             shape = np.asarray(prev["shape"], float)
             track = abs(frame - prev["pose_frame"]) <= MAX_TRACK_GAP
             fit = fit_frame(model, cameras, masks, frame=frame, shape=shape,
                             previous_pose=pose if track else None, hint_pose=None if track else pose,
-                            options=options, seed=seed, screen=screen)
+                            options=options, seed=seed, screen=screen, **extra)
             if track and fit.costs["total"] > RECOVERY_FACTOR * prev["ref_cost"]:
                 # tracking lost the body: search again from the silhouettes, keep the better fit
                 log.info("frame %d: tracking cost %.2f, re-initialising from the silhouettes", frame,
                          fit.costs["total"])
                 again = fit_frame(model, cameras, masks, frame=frame, shape=shape, hint_pose=pose,
-                                  options=options, seed=seed + 1, screen=screen)
+                                  options=options, seed=seed + 1, screen=screen, **extra)
                 if again.costs["total"] < fit.costs["total"]:
                     fit = again
     except UnusableFrame as err:

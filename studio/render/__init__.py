@@ -17,7 +17,7 @@ from studio.render.raster import (
     silhouettes,
 )
 from studio.render.shade import lambert, shade_raster, vertex_normals
-from studio.render.shadow import shadow_mask, shadow_vertices
+from studio.render.shadow import shadow_mask, shadow_outline, shadow_silhouettes, shadow_vertices
 from studio.render.solids import cylinder_mesh
 from studio.render.spans import silhouettes_contour, silhouettes_fast
 
@@ -34,6 +34,8 @@ __all__ = [
     "rasterize",
     "shade_raster",
     "shadow_mask",
+    "shadow_outline",
+    "shadow_silhouettes",
     "shadow_vertices",
     "silhouette",
     "silhouettes",

@@ -114,8 +114,32 @@ def _calibration_html(unc: dict, segmentation: dict) -> str:
             f"{_fmt(info.get('surface_sigma_mm'), 2)} mm per point.</p><table>{''.join(rows)}</table>")
 
 
-def page_html(data, *, max_overlay_frames: int = 4) -> str:
-    """The whole page of a :class:`~studio.report.data.ReportData`."""
+def _light_html(light: dict | None, camera_centres: dict | None) -> str:
+    """The light section (thesis ch. 5): the light from above and its posterior, when estimated."""
+    if not light:
+        return ""
+    from studio.light.figures import posterior_figure, top_view_figure
+    from studio.report.views import figure_base64
+
+    rows = []
+    for i, e in enumerate(light["lights"]):
+        where = (f"at ({', '.join(f'{v:.2f}' for v in e['position'])}) m, {e['distance_m']:.2f} m from the subject "
+                 f"(95 %: {e['distance_ci'][0]:+.1f} to {e['distance_ci'][1]:+.1f} %)" if e["kind"] == "point"
+                 else f"towards ({', '.join(f'{v:.3f}' for v in e['direction'])})")
+        rows.append(f"<li>light {i + 1}: {_esc(e['kind'])} {_esc(where)}, direction within "
+                    f"{e['direction_ci_deg']:.2f}° (95 %)</li>")
+    s = light["samples_summary"]
+    return (f"<h2>Light</h2><p>Estimated from the shadows of frames {_esc(light['frames'])} (thesis eq. 5.9; posterior by "
+            f"emcee, {s['n_samples']} samples, effective sample size {s['effective_sample_size']:.0f}).</p>"
+            f"<ul>{''.join(rows)}</ul><div class='row'>"
+            f"<img src=\"{figure_base64(top_view_figure(light, camera_centres))}\" alt=\"light from above\">"
+            f"<img src=\"{figure_base64(posterior_figure(light))}\" alt=\"posterior of the light\"></div>")
+
+
+def page_html(data, *, max_overlay_frames: int = 4, light: dict | None = None,
+              camera_centres: dict | None = None) -> str:
+    """The whole page of a :class:`~studio.report.data.ReportData` (with ``light``, the
+    contents of ``light/light.json``, a light section)."""
     from rigs.imageio import read_image
     from studio.fit import OVERLAY_COLORS
     from studio.fit.quality import summary_line
@@ -167,6 +191,7 @@ participant's sex. A figure resting on flagged frames or implausible against the
 <h2>Quality</h2><p>{_esc(qual or 'no quality gates recorded (fitted before they existed)')}.</p>
 {_quality_html(data.qualities)}
 <img src="{figure_base64(frames_figure(data.fits, data.qualities))}" alt="quality over frames">
+{_light_html(light, camera_centres)}
 <h2>Calibration and segmentation</h2>{_calibration_html(data.uncertainty, data.segmentation)}
 <h2>Overlays</h2><p>Full resolution, one image per camera. Legend: {legend}.</p>
 {''.join(overlay_rows)}
@@ -191,13 +216,35 @@ def write_report(source, *, participant=None, pdf: bool = False, posterior: bool
     data = gather(source, participant, posterior=posterior)
     lay = _layout(source)
     write_measurements(lay, data.table, data.participant.to_json())
-    p = atomic_write_text(lay.report_html, page_html(data, max_overlay_frames=max_overlay_frames))
+    light, centres = _light_of(lay)
+    p = atomic_write_text(lay.report_html, page_html(data, max_overlay_frames=max_overlay_frames, light=light,
+                                                     camera_centres=centres))
     if pdf:
         from studio.report.pdf import write_pdf
 
         write_pdf(data, lay.report_pdf)
     log.info("report written to %s in %.1f s", p, time.perf_counter() - t0)
     return p
+
+
+def _light_of(lay) -> tuple[dict | None, dict | None]:
+    """``light/light.json`` (None when absent or unreadable: the report goes on without it) and the
+    calibrated camera centres {name: (x, y, z)}."""
+    from studio.light import LightError, load_light
+
+    try:
+        _, light = load_light(lay.light_json)
+    except LightError as exc:
+        if lay.light_json.is_file():
+            log.warning("report without the light: %s", exc)
+        return None, None
+    try:
+        from calibration import RigCalibration
+
+        calib = RigCalibration.load(lay.source / "calibration.json")
+        return light, {c.name: c.center.tolist() for c in calib}
+    except Exception:  # noqa: BLE001 - the cameras are decoration of the top view
+        return light, None
 
 
 def _layout(source):

@@ -51,7 +51,7 @@ def test_demo_runs_the_pipeline_and_says_what_is_missing(tmp_path, monkeypatch, 
     assert main(["demo", "--spec", str(spec), "--frames", "0", "--workers", "1", "--quick"]) == 0
     out = capsys.readouterr().out
     assert calls["segment"] == [0]
-    assert "Not done yet" in out and "light" in out
+    assert "Not done yet" in out and "light: not estimated (no visible shadow" in out
     assert f"report: {(session / 'report' / 'index.html').resolve()}" in out
     html = (session / "report" / "index.html").read_text()
     assert "Not done yet" not in html and "does not do" not in html  # the report is for a study, not about the demo

@@ -37,6 +37,11 @@ def register(subparsers) -> None:
     p.add_argument("--out", type=Path, default=None,
                    help="write fit/ into this folder instead of the session (e.g. a read-only session; "
                         "its segmentation/ is read from there too)")  # fmt: skip
+    p.add_argument("--shadows", action="store_true",
+                   help="add the shadow term (thesis eq. 5.7) with the light of light/light.json; without one, fit "
+                        "from the silhouettes, estimate the light (studio light) and fit again with the shadows")  # fmt: skip
+    p.add_argument("--shadow-weight", type=float, default=1.0,
+                   help="weight of the shadow term, whose views are averaged (default: %(default)s)")  # fmt: skip
     p.set_defaults(func=run)
 
 
@@ -59,6 +64,10 @@ def run(args) -> int:
         raise CommandError(str(exc)) from None
     frames = select_frames(args.frames, ws.frame_indices)
     options = FitOptions(**QUICK) if args.quick else FitOptions()
+    if args.shadows and args.shadow_weight < 0:
+        raise CommandError(f"--shadow-weight must be >= 0, got {args.shadow_weight}")
+    if args.shadows and not ws.layout.light_json.is_file():
+        _light_first(ws, args, frames, options)
     with Progress("[progress.description]{task.description}", BarColumn(), MofNCompleteColumn(),
                   TimeElapsedColumn()) as bar:
         n = len(frames) if frames is not None else len(ws.frame_indices)
@@ -66,7 +75,7 @@ def run(args) -> int:
         try:
             summary = fit_session(ws, frames=frames, gender=args.gender, workers=args.workers,
                                   scheduler=args.scheduler, chain_length=args.chain_length, options=options,
-                                  seed=args.seed, force=args.force,
+                                  seed=args.seed, force=args.force, shadows=args.shadow_weight if args.shadows else None,
                                   progress=lambda done, total: bar.update(task, completed=done))
         except FitError as exc:
             raise CommandError(str(exc)) from None
@@ -77,4 +86,27 @@ def run(args) -> int:
           f"on {summary['executor']} "
           f"(cost mean {sum(costs) / len(costs):.2f}); results in {ws.layout.fit_dir}")
     print(f"quality: {summary['quality_summary']}")
+    if args.shadows:
+        from studio.fit import load_fits
+
+        shadow = [f.costs.get("shadow") for f in load_fits(ws, frames).values() if f.costs.get("shadow") is not None]
+        if shadow:
+            print(f"shadow term (eq. 5.7, weight {args.shadow_weight:g}): mean {sum(shadow) / len(shadow):.2f} "
+                  f"over {len(shadow)} frame(s)")
     return 0
+
+
+def _light_first(ws, args, frames, options) -> None:
+    """No light yet: fit from the silhouettes alone (eq. 5.8), estimate the light (eq. 5.9)."""
+    from studio.cli import CommandError
+    from studio.fit import FitError, fit_session
+    from studio.light import LightError, estimate_session_light
+
+    print(f"no {ws.layout.light_json}: fitting from the silhouettes, then estimating the light")
+    try:
+        fit_session(ws, frames=frames, gender=args.gender, workers=args.workers, scheduler=args.scheduler,
+                    chain_length=args.chain_length, options=options, seed=args.seed)
+        light = estimate_session_light(ws, frames=None, workers=min(args.workers, 2), seed=args.seed)
+    except (FitError, LightError) as exc:
+        raise CommandError(str(exc)) from None
+    print(f"light: {light['kind']}, direction ±{light['direction_ci_deg']:.2f}° (95%); now fitting with the shadows")

@@ -1,0 +1,139 @@
+"""The light's objective: predicted against observed shadow silhouettes over frames (eq. 5.9).
+
+For fixed bodies ``s^t`` (fitted, or the truth in tests) the cost of a light hypothesis ℓ is
+
+    E(ℓ) = Σ_t Σ_k D(S^e_{k,t}(s^t, ℓ, g), S^o_{k,t})                                (5.9)
+
+with ``D`` the symmetric truncated chamfer distance of eq. 4.5 (:func:`studio.cost.silhouette_cost`)
+and ``S^e`` the *visible* predicted shadow: the shadow of the body through ℓ onto the ground g
+(:func:`studio.render.shadow_outline`, eq. 5.2) rendered in camera k (eq. 5.3), less the body's
+own silhouette in that camera (thesis §5.6: shadows first, then the body). Everything that does
+not depend on ℓ — the observed shadows' distance maps, the body silhouettes, the face normals and
+edge topology of each mesh — is computed once per frame in :class:`ShadowFrame`; one evaluation
+is then a light-facing test, the contour edges and a winding fill per view.
+
+The comparison is made in each camera's *ideal* (undistorted, same K) image at the pyramid
+level: the observed masks are undistorted once (:meth:`calibration.Camera.undistort_image`) and
+the body silhouettes rendered with the ideal camera, so that the shadow outline on the ground
+reaches every view by one 3×4 projection (eq. 5.3 without the lens), for all views at once.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import numpy as np
+
+from studio.cost import SilhouetteTarget, silhouette_cost
+from studio.render.pyramid import level_camera
+from studio.render.shadow import join_outlines, shadow_outline, shadow_silhouettes
+from studio.render.spans import _topology, face_normals, silhouettes_contour
+
+__all__ = ["ShadowFrame", "ShadowObjective", "ideal_camera", "predicted_shadows", "projection_matrices"]
+
+
+@dataclass(frozen=True, eq=False)
+class ShadowFrame:
+    """The ℓ-independent part of one frame: the body mesh (``vertices`` (V, 3), ``faces``), its
+    face ``normals`` and edge ``topology``, the observed shadows as a :class:`SilhouetteTarget`
+    and the body's silhouette in every view (``occluders``, at the target's level)."""
+
+    frame: int
+    vertices: np.ndarray
+    faces: np.ndarray
+    normals: tuple
+    topology: object
+    target: SilhouetteTarget
+    occluders: tuple
+
+    @classmethod
+    def build(cls, frame: int, vertices: np.ndarray, faces: np.ndarray, cameras: Sequence,
+              shadow_masks: Sequence[np.ndarray], *, level: int = 2, tau: float = 20.0,
+              xi: float = 1.0) -> ShadowFrame:
+        """``cameras`` full-resolution, ``shadow_masks`` (H, W) bool observed shadows (label 2)
+        in the same order."""
+        V = np.asarray(vertices, dtype=np.float64)
+        F = np.asarray(faces, dtype=np.int64)
+        cams = [level_camera(ideal_camera(c), level) for c in cameras]
+        masks = [c.undistort_image(np.asarray(m, bool)) for c, m in zip(cameras, shadow_masks, strict=True)]
+        target = SilhouetteTarget.build(masks, tau=tau, xi=xi, level=level, names=[c.name for c in cameras])
+        occ = tuple(silhouettes_contour(cams, V, F))
+        return cls(int(frame), V, F, face_normals(V, F), _topology(F, len(V)), target, occ)
+
+
+def ideal_camera(camera):
+    """``camera`` without its lens distortion (an ideal pinhole with the same K, R, t)."""
+    return camera.replace(dist=np.zeros(5), model="pinhole")
+
+
+def projection_matrices(cameras: Sequence) -> np.ndarray:
+    """(C, 3, 4) ``K [R | t]`` of ideal pinhole ``cameras``."""
+    return np.stack([np.asarray(c.K, float) @ np.hstack([np.asarray(c.R, float), np.asarray(c.t, float).reshape(3, 1)])
+                     for c in cameras])
+
+
+def predicted_shadows(frame: ShadowFrame, cameras: Sequence, lights, ground=None,
+                      matrices: np.ndarray | None = None) -> list[np.ndarray]:
+    """Visible predicted shadows S^e (H_l, W_l) bool of ``frame`` in the ideal level ``cameras``:
+    the union of the shadows of every light, less the body's own silhouette (thesis §5.6).
+    ``matrices``: their :func:`projection_matrices` (computed when None)."""
+    from studio.render.winding import winding_fill
+
+    M = projection_matrices(cameras) if matrices is None else matrices
+    outlines = [shadow_outline(frame.vertices, frame.faces, light, ground, normals=frame.normals,
+                               topology=frame.topology) for light in lights]
+    fast = all(o is not None for o in outlines)
+    if fast:
+        P, a, b = join_outlines(outlines)
+        uvw = P @ M[:, :, :3].transpose(0, 2, 1) + M[:, None, :, 3]
+    out = []
+    for k, (cam, occ) in enumerate(zip(cameras, frame.occluders, strict=True)):
+        m = None
+        if fast and len(a) == 0:
+            m = np.zeros(occ.shape, bool)
+        elif fast and uvw[k, :, 2].min() > 1e-3:
+            uv = uvw[k, :, :2] / uvw[k, :, 2:]
+            m = winding_fill(uv[a], uv[b], cam.size[0], cam.size[1])
+        out.append(m & ~occ if m is not None else
+                   shadow_silhouettes([cam], frame.vertices, frame.faces, lights, ground, occluders=[occ])[0])
+    return out
+
+
+class ShadowObjective:
+    """E(ℓ) of eq. 5.9 over ``frames`` (:class:`ShadowFrame`, all at one level) seen by
+    ``cameras`` (full resolution, in the targets' order), shadows cast on ``ground`` (None: the
+    floor z = 0). Call with a list of lights (their union casts the shadows)."""
+
+    def __init__(self, frames: Sequence[ShadowFrame], cameras: Sequence, ground=None):
+        if not frames:
+            raise ValueError("frames: at least one frame is needed")
+        self.frames = list(frames)
+        level = self.frames[0].target.level
+        self.cameras = [level_camera(ideal_camera(c), level) for c in cameras]
+        self.matrices = projection_matrices(self.cameras)
+        self.ground = ground
+        self.n_evaluations = 0
+
+    @property
+    def n_terms(self) -> int:
+        """Number of (frame, view) terms of the sum."""
+        return sum(len(f.target) for f in self.frames)
+
+    def per_view(self, lights) -> np.ndarray:
+        """(T, K) ``D(S^e_{k,t}, S^o_{k,t})`` per frame and view."""
+        self.n_evaluations += 1
+        return np.stack([silhouette_cost(f.target, predicted_shadows(f, self.cameras, lights, self.ground, self.matrices)).per_view
+                         for f in self.frames])
+
+    def __call__(self, lights) -> float:
+        return float(self.per_view(lights).sum())
+
+    def many(self, hypotheses) -> np.ndarray:
+        """(N,) costs of a list of hypotheses (each a list of lights)."""
+        return np.array([self(h) for h in hypotheses])
+
+    def empty_cost(self) -> float:
+        """E with no predicted shadow at all: what a light casting nothing visible would score."""
+        return float(sum(silhouette_cost(f.target, [np.zeros(f.target.image_size, bool)] * len(f.target)).total
+                         for f in self.frames))

@@ -37,6 +37,15 @@ def register(subparsers) -> None:
     p.add_argument("--out", type=Path, default=None,
                    help="write fit/ into this folder instead of the session (e.g. a read-only session; "
                         "its segmentation/ is read from there too)")  # fmt: skip
+    p.add_argument("--batch", action="store_true",
+                   help="after the single-frame fits, fit one shape shared by several frames under clothing "
+                        "(thesis ch. 6): gender by batch, fit/batch.json and fit/batch_neutral.ply")  # fmt: skip
+    p.add_argument("--clothing", default="auto", choices=["auto", "tight", "loose"],
+                   help="--batch: clothing-robust cost; auto fits loose and calls it tight when the body fills "
+                        "the clothes (default: %(default)s)")  # fmt: skip
+    p.add_argument("--batch-frames", type=int, default=8,
+                   help="--batch without --frames: how many frames to choose (good quality, diverse postures; "
+                        "default: %(default)s)")  # fmt: skip
     p.set_defaults(func=run)
 
 
@@ -59,6 +68,10 @@ def run(args) -> int:
         raise CommandError(str(exc)) from None
     frames = select_frames(args.frames, ws.frame_indices)
     options = FitOptions(**QUICK) if args.quick else FitOptions()
+    if args.batch:
+        from studio.fit.batch_session import run_batch_command
+
+        return run_batch_command(args, ws, frames, options)
     with Progress("[progress.description]{task.description}", BarColumn(), MofNCompleteColumn(),
                   TimeElapsedColumn()) as bar:
         n = len(frames) if frames is not None else len(ws.frame_indices)

@@ -36,7 +36,8 @@ from studio.fit.errors import FitError
 from studio.fit.objective import FrameObjective, pose_bounds
 from studio.optimize import Stage, staged_nelder_mead
 
-__all__ = ["BatchFrame", "BatchOptions", "BatchResult", "ClothedObjective", "batch_fit", "convert_shape",
+__all__ = ["BatchFrame", "BatchOptions", "BatchResult", "ClothedObjective", "batch_fit", "compare_genders",
+           "convert_shape",
            "consistency", "choose_frames", "clothing_targets", "pose_step"]
 
 log = logging.getLogger(__name__)
@@ -333,6 +334,21 @@ def consistency(batch_model: BodyModel, shape: np.ndarray, poses: np.ndarray, fr
             "thresholds": {"cost_ratio": COST_RATIO_FLAG, "stature_spread_m": STATURE_SPREAD_FLAG}}
 
 
+def compare_genders(frames: list[BatchFrame], source: BodyModel, shape: np.ndarray, poses: np.ndarray,
+                    options: BatchOptions) -> dict:
+    """§6.4.5: with the poses fixed, the first ``gender_shape_free`` coefficients of the female
+    and of the male model, started from ``source``'s body ``shape``, by a shape step each;
+    {gender: (model, shape, batch cost)} — the lower cost (eq. 6.7) wins. With one frame this
+    is the thesis' single-pose gender classification."""
+    out = {}
+    for g in ("female", "male"):
+        m = BodyModel.load(g)
+        s, c = _Batch(m, frames, options).shape_step(convert_shape(source, shape, m), poses,
+                                                    options.gender_shape_free, options.shape_evaluations)
+        out[g] = (m, s, c)
+    return out
+
+
 def batch_fit(frames: list[BatchFrame], *, gender: str = "auto", options: BatchOptions = BatchOptions(),
               runner=None) -> BatchResult:
     """Fit one shape and P poses to the frames (eq. 6.5–6.9), gender by batch when ``"auto"``.
@@ -355,17 +371,9 @@ def batch_fit(frames: list[BatchFrame], *, gender: str = "auto", options: BatchO
     gender_costs, margin, model = None, None, first
     timings = {"first_model": round(time.perf_counter() - t0, 3)}
     if gender == "auto":
-        # §6.4.5: poses fixed, the first coefficients of each gender model from the neutral body;
-        # the lower batch cost (eq. 6.7) wins
         t = time.perf_counter()
-        cands = {}
-        for g in ("female", "male"):
-            m = BodyModel.load(g)
-            b = _Batch(m, frames, options)
-            s, c = b.shape_step(convert_shape(first, shape, m), poses, options.gender_shape_free,
-                                options.shape_evaluations)
-            cands[g] = (m, s, c)
-            history.append({"model": g, "round": "gender", "cost": c})
+        cands = compare_genders(frames, first, shape, poses, options)
+        history += [{"model": g, "round": "gender", "cost": c} for g, (_, _, c) in cands.items()]
         gender_costs = {g: float(v[2]) for g, v in cands.items()}
         win = min(gender_costs, key=gender_costs.get)
         margin = float(max(gender_costs.values()) - gender_costs[win])

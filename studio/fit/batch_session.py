@@ -28,7 +28,7 @@ from studio.fit.batch import BatchFrame, BatchOptions, batch_fit, choose_frames
 from studio.fit.errors import FitError
 from studio.fit.frame import FitOptions
 
-__all__ = ["TIGHT_RECALL", "fit_batch_session", "load_batch"]
+__all__ = ["TIGHT_RECALL", "fit_batch_session", "load_batch", "run_batch_command", "session_skin"]
 
 log = logging.getLogger(__name__)
 
@@ -45,7 +45,7 @@ def _candidates(all_frames: list[int], n_frames: int) -> list[int]:
     return sorted({all_frames[i] for i in idx})
 
 
-def _skin_masks(ws, fits, frames, cameras_of) -> tuple[dict, dict]:
+def session_skin(ws, fits, frames, cameras_of) -> tuple[dict, dict]:
     """{frame: [skin mask per used camera]} from the adapted classifier, else the segmentation's."""
     from rigs.imageio import read_image
     from studio.body import BodyModel
@@ -104,6 +104,7 @@ def fit_batch_session(
     single_options: FitOptions = FitOptions(),
     options: BatchOptions = BatchOptions(),
     adapt_skin: bool = True,
+    chain_length: int | None = None,
     seed: int = 0,
     force: bool = False,
     out=None,
@@ -126,8 +127,10 @@ def fit_batch_session(
     cands = _candidates(ws.frame_indices, n_frames) if frames is None else list(dict.fromkeys(int(f) for f in frames))
     if len(cands) < 2:
         raise FitError(f"{ws.path}: a batch needs at least two frames, got {cands}")
+    from studio.fit.session import CHAIN_LENGTH
+
     fit_session(ws, frames=cands, gender=gender, workers=workers, scheduler=scheduler, options=single_options,
-                seed=seed, force=force, progress=progress)
+                chain_length=chain_length or CHAIN_LENGTH, seed=seed, force=force, progress=progress)
     fits = load_fits(ws, cands)
     chosen = choose_frames(fits, n_frames) if frames is None else [f for f in cands if f in fits]
     if len(chosen) < 2:
@@ -138,7 +141,7 @@ def fit_batch_session(
         dropped = set(screen_masks(ws.cameras, masks)["dropped"])
         cameras_of[f] = [c for c in ws.cameras if c.name not in dropped]
     if adapt_skin:
-        skin, skin_info = _skin_masks(ws, fits, chosen, cameras_of)
+        skin, skin_info = session_skin(ws, fits, chosen, cameras_of)
     else:
         skin, skin_info = {f: None for f in chosen}, {"source": "none"}
     batch_frames = []
@@ -221,7 +224,7 @@ def run_batch_command(args, ws, frames, options: FitOptions) -> int:
         try:
             obj = fit_batch_session(ws, frames=frames, n_frames=args.batch_frames, clothing=args.clothing,
                                     gender=args.gender, workers=args.workers, scheduler=args.scheduler,
-                                    single_options=options, options=batch_options, seed=args.seed, force=args.force,
+                                    chain_length=args.chain_length, single_options=options, options=batch_options, seed=args.seed, force=args.force,
                                     progress=lambda done, total: bar.update(task, completed=done, total=total))
         except FitError as exc:
             raise CommandError(str(exc)) from None

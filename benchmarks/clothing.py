@@ -6,7 +6,8 @@ of ``studio.simulate.truth_build.LAB_POSES``, jittered, random heading), rendere
 (short sleeves, trousers, no looseness) and **loose** (3.5 cm, a garment drawn per person: long
 shirt, jacket, wide trousers, skirt). Each session is segmented, every frame fitted alone from its
 silhouettes (``studio fit``'s single-frame fit, gender auto on the first frame), then the batch
-(``studio.fit.batch_session.fit_batch_session``: clothing cost of the condition, gender by batch).
+(``studio.fit.batch_session.fit_batch_session``: clothing cost of the condition, gender by batch)
+over the frames the quality gates pass; single-pose figures are over the same frames.
 
 Per subject × condition (cached as JSON: a rerun only does what is missing):
 
@@ -160,7 +161,8 @@ def run_one(p: dict, condition: str, workers: int) -> dict:
     ws = Workspace.open(session)
     frames = list(range(len(p["poses"])))
     options = BatchOptions(clothing=condition)
-    batch = fit_batch_session(ws, frames=frames, clothing=condition, gender="auto", workers=workers,
+    # every frame fitted alone; the batch takes the frames the quality gates pass (choose_frames)
+    batch = fit_batch_session(ws, n_frames=len(frames), clothing=condition, gender="auto", workers=workers,
                               chain_length=1, options=options)
     truth = load_truth(ws.layout)
     true_m = {k: truth["studio"][k] for k in MEASURES}
@@ -173,7 +175,8 @@ def run_one(p: dict, condition: str, workers: int) -> dict:
            "batch": {"gender": batch["gender"], "gender_costs": batch["gender_costs"],
                      "margin": batch["gender_margin"], "errors_mm": {k: 1000 * (bm[k] - true_m[k]) for k in MEASURES},
                      "consistency": batch["consistency"], "timings": batch["timings"]},
-           "single": {}, "time_segment_s": t_seg, "time_batch_s": batch["wall_time"]}
+           "single": {}, "time_segment_s": t_seg, "time_batch_s": batch["wall_time"],
+           "frames_left_out": {str(f): fits[f].status for f in frames if f not in batch["frames"]}}
     surf_b = []
     cams = ws.cameras
     opts_gender = BatchOptions(clothing=condition)

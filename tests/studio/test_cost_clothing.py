@@ -27,7 +27,7 @@ def scene():
 def test_matches_the_reference_chamfer_per_region():
     observed, skin = scene()
     model = disc(SHAPE, (60, 72), 28) | (np.pad(np.ones((8, 60), bool), ((56, 56), (75, 25))))
-    target = ClothingTarget.build([observed], [skin], tau=20.0, tau_cloth=4.0, cloth_weight=0.1)
+    target = ClothingTarget.build([observed], [skin], tau=20.0, tau_cloth=4.0, cloth_weight=0.1, normalise="region")
     cost = clothing_cost(target, [model])
     cloth = observed & ~skin
     assert cost.inside[0] == pytest.approx(truncated_chamfer(model, observed, 20.0), rel=1e-5)
@@ -37,10 +37,28 @@ def test_matches_the_reference_chamfer_per_region():
                                        + 0.1 * cost.expansion["clothing"][0])
     # at a pyramid level: the level's masks, τ in level pixels, distances back in full-resolution units
     down = lambda m: downsample_mask(m, 1)  # noqa: E731
-    coarse = clothing_cost(ClothingTarget.build([observed], [skin], tau=20.0, tau_cloth=4.0, level=1), [down(model)])
+    coarse = clothing_cost(ClothingTarget.build([observed], [skin], tau=20.0, tau_cloth=4.0, level=1, normalise="region"),
+                           [down(model)])
     assert coarse.expansion["clothing"][0] == pytest.approx(
         2 * truncated_chamfer(down(observed & ~skin), down(model), 2.0), rel=1e-5)
     assert coarse.inside[0] == pytest.approx(2 * truncated_chamfer(down(model), down(observed), 10.0), rel=1e-5)
+
+
+def test_silhouette_normalisation_makes_tight_clothing_eq_4_5():
+    """Normalised by the whole silhouette, τ_c = τ and λ_c = 1 give the symmetric cost of eq. 4.5;
+    each region's share is its numerator over |F^o|."""
+    from studio.cost import SilhouetteTarget, silhouette_cost
+
+    observed, skin = scene()
+    model = disc(SHAPE, (60, 72), 28)
+    tight = clothing_cost(ClothingTarget.build([observed], [skin], cloth_weight=1.0), [model])
+    plain = silhouette_cost(SilhouetteTarget.build([observed]), [model])
+    assert tight.total == pytest.approx(plain.total, rel=1e-6)
+    region = clothing_cost(ClothingTarget.build([observed], [skin], cloth_weight=1.0, normalise="region"), [model])
+    share = skin.sum() / observed.sum()
+    assert tight.expansion["skin"][0] == pytest.approx(region.expansion["skin"][0] * share, rel=1e-6)
+    with pytest.raises(ValueError, match="normalise: expected 'region' or 'silhouette'"):
+        ClothingTarget.build([observed], [skin], normalise="pixels")
 
 
 def test_inside_term_is_zero_inside_and_grows_outside():
@@ -79,7 +97,7 @@ def test_loose_clothing_lets_a_smaller_body_cost_less_than_tight():
 
 def test_empty_model_and_bad_inputs():
     observed, skin = scene()
-    target = ClothingTarget.build([observed], [skin], tau=20.0, tau_cloth=4.0)
+    target = ClothingTarget.build([observed], [skin], tau=20.0, tau_cloth=4.0, normalise="region")
     cost = clothing_cost(target, [np.zeros(SHAPE, bool)])
     assert cost.inside[0] == 0.0
     assert cost.expansion["skin"][0] == pytest.approx(20.0)

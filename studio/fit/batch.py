@@ -87,8 +87,9 @@ class BatchOptions:
         for name in ("rounds", "pose_evaluations", "shape_evaluations", "final_evaluations", "n_shape_free",
                      "gender_shape_free"):
             value = getattr(self, name)
-            if isinstance(value, bool) or not isinstance(value, int) or value < (0 if name in ("rounds", "final_evaluations") else 1):
-                raise FitError(f"{name}: expected a positive integer, got {value!r}")
+            least = 0 if name in ("rounds", "final_evaluations") else 1
+            if isinstance(value, bool) or not isinstance(value, int) or value < least:
+                raise FitError(f"{name}: expected an integer >= {least}, got {value!r}")
 
     @property
     def cloth(self) -> tuple[float, float]:

@@ -224,11 +224,15 @@ def run_batch_command(args, ws, frames, options: FitOptions) -> int:
         try:
             obj = fit_batch_session(ws, frames=frames, n_frames=args.batch_frames, clothing=args.clothing,
                                     gender=args.gender, workers=args.workers, scheduler=args.scheduler,
-                                    chain_length=args.chain_length, single_options=options, options=batch_options, seed=args.seed, force=args.force,
+                                    chain_length=args.chain_length, single_options=options, options=batch_options,
+                                    seed=args.seed, force=args.force,
                                     progress=lambda done, total: bar.update(task, completed=done, total=total))
         except FitError as exc:
             raise CommandError(str(exc)) from None
-    margin = "" if obj["gender_margin"] is None else f" (margin {obj['gender_margin']:.3f} over {sorted(obj['gender_costs'], key=obj['gender_costs'].get)[1]})"
+    margin = ""
+    if obj["gender_margin"] is not None:
+        loser = max(obj["gender_costs"], key=obj["gender_costs"].get)
+        margin = f" (cost margin {obj['gender_margin']:.3f} over {loser})"
     print(f"batch of {len(obj['frames'])} frames {obj['frames']}: {obj['gender']}{margin}, clothing {obj['clothing']}, "
           f"stature {obj['measurements']['stature'] * 1000:.0f} mm, cost {obj['total']:.2f} in {obj['wall_time']:.0f} s; "
           f"results in {ws.layout.fit_batch}")

@@ -15,8 +15,8 @@ from test_fit_frame import ring_cameras
 
 TINY = FitOptions(levels=(2, 2, 1), n_particles=24, n_layers=3, nm_evaluations=25, final_evaluations=30,
                   n_shape_free=3, limb_particles=0, partition_particles=0, rival_heading=False)
-BATCH = BatchOptions(clothing="tight", levels=(2, 1), rounds=1, pose_evaluations=40, shape_evaluations=60, final_evaluations=30,
-                     n_shape_free=3, gender_shape_free=3)
+BATCH = BatchOptions(clothing="tight", levels=(2, 1), rounds=1, pose_evaluations=40, shape_evaluations=60,
+                     final_evaluations=30, n_shape_free=3, gender_shape_free=3)
 
 
 def person(model, size: float, short: float, arm: float, leg: float, heading: float, xy):
@@ -107,7 +107,7 @@ def test_frame_choice_and_bad_options(frames):
     assert len(chosen) == 2 and chosen == sorted(chosen)
     with pytest.raises(FitError, match="clothing: expected one of tight, loose"):
         BatchOptions(clothing="baggy")
-    with pytest.raises(FitError, match="pose_evaluations: expected a positive integer"):
+    with pytest.raises(FitError, match="pose_evaluations: expected an integer >= 1"):
         BatchOptions(pose_evaluations=0)
     with pytest.raises(FitError, match="batch fit: no frames"):
         batch_fit([])

@@ -263,8 +263,9 @@ def summarise(rows: list[dict]) -> dict:
         for k in MEASURES:
             per = [np.array([v["measures_m"][k] for v in r["single"].values()]) for r in rs]
             within = float(np.mean([x.var() for x in per]))
-            across = float(np.var([x.mean() for x in per])) if len(per) > 1 else float("nan")
-            cons[k] = {"within_pose_sd_mm": 1000 * np.sqrt(within), "across_subject_sd_mm": 1000 * np.sqrt(across)}
+            across = float(np.var([x.mean() for x in per])) if len(per) > 1 else None
+            cons[k] = {"within_pose_sd_mm": 1000 * np.sqrt(within),
+                       "across_subject_sd_mm": None if across is None else 1000 * np.sqrt(across)}
         s["constancy"] = cons
         single_ok = [v["gender_single"] == r["sex"] for r in rs for v in r["single"].values()]
         s["gender_pct"] = {"single": 100 * float(np.mean(single_ok)),
@@ -295,7 +296,8 @@ def table(args) -> int:
                   f"{m['single_mean']:>+12.1f}")
         print(f"{'surface (median) mm':<22} {s['surface_mm']['batch_median']:>15.1f} {s['surface_mm']['single_median']:>16.1f}")
         print("shape constancy (sd across poses / across subjects, mm): " + ", ".join(
-            f"{k.split('_')[0]} {v['within_pose_sd_mm']:.1f}/{v['across_subject_sd_mm']:.1f}"
+            f"{k.split('_')[0]} {v['within_pose_sd_mm']:.1f}/"
+            f"{'–' if v['across_subject_sd_mm'] is None else format(v['across_subject_sd_mm'], '.1f')}"
             for k, v in s["constancy"].items()))
         g = s["gender_pct"]
         print(f"gender accuracy single / vote / batch: {g['single']:.0f} / {g['vote']:.0f} / {g['batch']:.0f} % "

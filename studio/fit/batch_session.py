@@ -33,8 +33,8 @@ __all__ = ["TIGHT_RECALL", "fit_batch_session", "load_batch", "run_batch_command
 log = logging.getLogger(__name__)
 
 #: ``clothing="auto"``: share of the clothing pixels the loose batch body covers from which the
-#: clothing is called tight (simulated people: tight ≈ 0.95, 3.5 cm loose ≈ 0.8; see the
-#: clothing benchmark).
+#: clothing is called tight. Provisional: set from geometry (3.5 cm of cloth at 3.6 m is ~5 px of
+#: a ~60 px wide torso at 656×490), not yet measured on the benchmark's tight and loose people.
 TIGHT_RECALL = 0.92
 
 

@@ -55,6 +55,7 @@ def test_wheel_contains_what_the_demo_needs(tmp_path):
     names = set(zipfile.ZipFile(wheel).namelist())
     needed = ["studio/body/data/scape_models.npz", "studio/fit/data/ansur2_summary.json", "studio/report/data/ansur2_percentiles.json", "studio/samples/walk/spec.yaml", "studio/samples/walk/body.npz",
               "studio/samples/clothing_poses/spec.yaml", "studio/samples/mono_shadow/spec.yaml",
+              "studio/samples/clothing_11/spec.yaml", "studio/samples/clothing_11/body.npz",
               "rigs/simulated.yaml", "calibration/boards/opencv_chessboard_9x6.yaml", "studio/cli/commands/demo.py"]
     missing = [n for n in needed if n not in names]
     assert not missing, f"the wheel lacks {missing}"

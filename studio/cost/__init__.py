@@ -5,6 +5,8 @@
 - :mod:`~studio.cost.silhouette`: :class:`SilhouetteTarget`, the observed frame
   precomputed once, and :func:`silhouette_cost`, the fast multi-view score (eq. 4.6),
   with pyramid levels for coarse-to-fine fitting;
+- :mod:`~studio.cost.clothing`: the clothing-robust cost (eq. 6.1–6.4): inside term plus
+  skin / clothing expansion with their own truncations and weights;
 - :mod:`~studio.cost.priors`: shape prior (eq. 6.8), pose prior (eq. 6.9) and the
   term-by-term report of the combined objective (eq. 6.7).
 """
@@ -16,6 +18,7 @@ from .chamfer import (
     truncated_chamfer,
     truncated_distance_map,
 )
+from .clothing import CLOTHING_PRESETS, ClothingCost, ClothingTarget, clothing_cost, inside_term
 from .priors import (
     CostTerms,
     PosePrior,
@@ -37,6 +40,11 @@ from .silhouette import (
 )
 
 __all__ = [
+    "CLOTHING_PRESETS",
+    "ClothingCost",
+    "ClothingTarget",
+    "clothing_cost",
+    "inside_term",
     "DEFAULT_TAU",
     "DISTANCE_MASKS",
     "CostTerms",

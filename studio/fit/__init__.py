@@ -6,9 +6,13 @@
   (:mod:`studio.fit.units`, :mod:`studio.execution`), chains of tracked frames;
 - :mod:`studio.fit.quality`: the quality gates every fitted frame carries (status ok /
   suspect / failed with reasons);
-- :mod:`studio.fit.evaluate`: accuracy against a simulated session's truth.
+- :mod:`studio.fit.evaluate`: accuracy against a simulated session's truth;
+- :mod:`studio.fit.batch` / :mod:`studio.fit.batch_session`: the clothing-robust multi-pose batch
+  (one shape, one pose per frame, gender by batch; thesis ch. 6) and ``studio fit --batch``.
 """
 
+from studio.fit.batch import BatchFrame, BatchOptions, BatchResult, batch_fit
+from studio.fit.batch_session import fit_batch_session, load_batch
 from studio.fit.errors import FitError, UnusableFrame
 from studio.fit.frame import FitOptions, FrameFit, fit_frame, fit_frame_gender
 from studio.fit.init import hull_centroid, initial_poses
@@ -18,6 +22,12 @@ from studio.fit.quality import fit_quality, screen_masks
 from studio.fit.session import fit_session, load_fits, load_quality, open_workspace
 
 __all__ = [
+    "BatchFrame",
+    "BatchOptions",
+    "BatchResult",
+    "batch_fit",
+    "fit_batch_session",
+    "load_batch",
     "FitError",
     "FitOptions",
     "FrameFit",

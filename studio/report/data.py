@@ -64,6 +64,7 @@ class ReportData:
     settings: dict
     sequence: dict = field(default_factory=dict)
     version: str = ""
+    batch: dict | None = None
 
 
 def _segmentation_summary(qualities: dict) -> dict:
@@ -87,7 +88,8 @@ def gather(source, participant: Participant | None = None, *, posterior: bool = 
     from studio.body.iso7250 import measure_iso
     from studio.body.measure import t_pose
     from studio.fit import load_fits, load_quality
-    from studio.report.measurements import frames_used, load_truth, measurement_table
+    from studio.fit.batch_session import load_batch
+    from studio.report.measurements import frames_used, load_truth, measurement_table, use_batch_shape
     from studio.report.uncertainty import session_uncertainty
     from studio.workspace import Layout, Workspace
 
@@ -113,6 +115,13 @@ def gather(source, participant: Participant | None = None, *, posterior: bool = 
         unc = session_uncertainty(model, ws.cameras, ws.calibration, fits, used, masks_of)
     table = measurement_table(model, fits, load_truth(lay), unc, sex=sex)
     shape = np.mean([fits[f].shape for f in used], axis=0)
+    first = fits[used[0]]
+    posed = model.vertices(first.shape, first.pose)
+    batch = load_batch(lay)
+    if batch is not None:  # one shape shared by the batch frames (thesis ch. 6) is the body measured
+        model, gender, shape = BodyModel.load(batch["gender"]), batch["gender"], np.asarray(batch["shape"], float)
+        sex = participant.sex or (gender if gender in ("female", "male") else "neutral")
+        table = use_batch_shape(table, model, shape, load_truth(lay), sex=sex, frames=batch["frames"])
     rest = model.vertices(shape)
     measured = measure_iso(rest, model.vertices(shape, t_pose(model, shape)), model.joint_regressor @ rest,
                            model.faces, model.parts, model.face_parts)
@@ -122,10 +131,9 @@ def gather(source, participant: Participant | None = None, *, posterior: bool = 
     for f in sorted(fits):
         overlays[f] = [(c, lay.fit_overlay(c, f)) for c in cameras if lay.fit_overlay(c, f).is_file()]
     seq = json.loads(lay.fit_sequence.read_text()) if lay.fit_sequence.is_file() else {}
-    first = fits[used[0]]
     return ReportData(
         session_name=lay.source.name, participant=participant, gender=gender, sex=sex, fits=fits,
         qualities=qualities, table=table, uncertainty=unc, frames_used=used, shape=shape, measured=measured,
-        rest_vertices=rest, faces=model.faces, posed_vertices=model.vertices(first.shape, first.pose),
+        rest_vertices=rest, faces=model.faces, posed_vertices=posed,
         overlays=overlays, segmentation=_segmentation_summary(qualities), settings=dict(first.settings),
-        sequence=seq, version=studio.__version__)
+        sequence=seq, version=studio.__version__, batch=batch)

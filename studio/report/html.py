@@ -171,7 +171,8 @@ def page_html(data, *, max_overlay_frames: int = 4, light: dict | None = None,
     meta = [("Participant", p.id or "(not given)"), ("Sex", p.sex or f"not given (population: {data.sex})"),
             ("Age", "not given" if p.age is None else f"{p.age:g} years"), ("Notes", p.notes or "–"),
             ("Session", data.session_name), ("Body model", data.gender),
-            ("Frames", f"{len(frames)} fitted, {len(data.frames_used)} used for the measurements"),
+            ("Frames", f"{len(frames)} fitted, {len(data.frames_used)} used for the measurements"
+             if data.batch is None else f"{len(frames)} fitted; measured on the batch shape of frames {data.batch['frames']}"),
             ("Software", f"Silhouette & Shadow Studio {data.version}"),
             ("Fit settings", json.dumps(data.settings, sort_keys=True)[:600] or "–")]
     meta_html = "".join(f"<tr><th class=l>{_esc(k)}</th><td>{_esc(v)}</td></tr>" for k, v in meta)
@@ -184,7 +185,7 @@ horizontal). σ combines the spread over frames (standard error of the mean), th
 the body's surface, and the fit's own posterior ({post}). The ISO 20685-1:2018 column is the maximum allowable error of a
 scan-derived measurement; “meets it” compares the 95 % half-width with it. Percentiles against ANSUR II (US Army, 2012) of the
 participant's sex. A figure resting on flagged frames or implausible against the population is struck through and marked.</p>
-{_table_html(data.table)}
+{_batch_html(data.batch)}{_table_html(data.table)}
 <img src="{figure_base64(uncertainty_figure(data.table))}" alt="measurement uncertainty">
 <h2>Landmarks and measurement lines</h2><p>{draw_legend}. Front, left, back, right.</p><img src="{png_base64(rest)}" alt="body with landmarks">
 <p>Frame {_esc(frames[0])}, fitted pose:</p><img src="{png_base64(posed)}" alt="fitted pose">
@@ -198,6 +199,21 @@ participant's sex. A figure resting on flagged frames or implausible against the
 <footer>Generated {time.strftime('%Y-%m-%d %H:%M:%S')} by <code>studio report</code> (Silhouette &amp; Shadow Studio {_esc(data.version)}).
 Method: Bălan, Detailed Human Shape and Pose from Images (annealed particle filter and staged Nelder–Mead on the silhouette cost, eq. 4.6).</footer>
 </body></html>"""
+
+
+def _batch_html(batch: dict | None) -> str:
+    """The paragraph saying the measurements rest on the batch shape (thesis ch. 6), or nothing."""
+    if batch is None:
+        return ""
+    margin = ("" if batch.get("gender_margin") is None else
+              f", gender by batch with a cost margin of {batch['gender_margin']:.3f}")
+    cons = batch.get("consistency") or {}
+    warn = (f" <b>Flagged: the frames may not show one person ({_esc('; '.join(cons.get('reasons', [])))}).</b>"
+            if cons.get("flagged") else "")
+    return (f"<p class=batch>Measured on the <b>batch shape</b>: one body shape shared by frames "
+            f"{_esc(batch['frames'])} with one pose each (thesis ch. 6, eq. 6.5–6.9), {_esc(batch['gender'])} model"
+            f"{_esc(margin)}, {_esc(batch.get('clothing', ''))} clothing cost. The per-frame values and the spread are "
+            f"those of the single-frame fits.{warn}</p>")
 
 
 def write_report(source, *, participant=None, pdf: bool = False, posterior: bool = True,

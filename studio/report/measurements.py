@@ -17,8 +17,8 @@ import numpy as np
 
 from studio.body.iso7250 import DEFINITIONS, ISO_NAMES
 
-__all__ = ["REPORTED", "UNITS", "frames_used", "load_truth", "measurement_table", "write_measurements",
-           "write_measurements_csv"]
+__all__ = ["REPORTED", "UNITS", "frames_used", "load_truth", "measurement_table", "use_batch_shape",
+           "write_measurements", "write_measurements_csv"]
 
 #: Measurements reported, in order (:data:`studio.body.iso7250.ISO_NAMES`).
 REPORTED = ISO_NAMES
@@ -130,6 +130,41 @@ def measurement_table(model, fits: dict, truth: dict | None = None, uncertainty:
         if row["truth"] is not None:
             row["error"] = mean - row["truth"]
             row["truth_in_ci95"] = bool(row["ci95"][0] <= row["truth"] <= row["ci95"][1])
+        out[name] = row
+    return out
+
+
+def use_batch_shape(table: dict, model, shape, truth: dict | None = None, sex: str | None = None,
+                    frames: list | None = None) -> dict:
+    """The table measured on the batch shape (thesis ch. 6: one shape shared by the frames,
+    ``fit/batch.json``) instead of the mean of the single-frame shapes: each row's ``mean`` is the
+    batch body's value (``model`` the batch's gender), its interval moved with it, the truth error
+    and population recomputed; the per-frame values and their spread stay as they were (the
+    single-frame fits), ``shape_source`` says ``"batch"``. Returns a new table."""
+    from studio.body import measure
+    from studio.report.population import population_context
+
+    values = measure(model, shape)
+    same = _same_definition_truth(truth)
+    out = {}
+    for name, row in table.items():
+        row = dict(row)
+        scale = UNITS[name][1]
+        value = float(values[name]) * scale
+        delta = value - row["mean"]
+        row["mean"] = value
+        row["ci95"] = [row["ci95"][0] + delta, row["ci95"][1] + delta]
+        row["shape_source"] = "batch"
+        row["batch_frames"] = [int(f) for f in frames or []]
+        pop = population_context(name, value / scale, sex or model.gender)
+        row["population"], row["population_z"] = pop, None if pop is None else pop["z"]
+        if row.get("truth_anny") is not None:
+            row["error_anny"] = value - row["truth_anny"]
+        if row.get("truth") is not None:
+            row["error"] = value - row["truth"]
+            row["truth_in_ci95"] = bool(row["ci95"][0] <= row["truth"] <= row["ci95"][1])
+        elif same.get(name) is not None:
+            row["truth"], row["error"] = float(same[name]) * scale, value - float(same[name]) * scale
         out[name] = row
     return out
 

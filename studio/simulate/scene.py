@@ -15,6 +15,7 @@ import numpy as np
 
 from calibration import Camera, GroundPlane, RigCalibration
 from studio.render import PointLight, light_from_dict, rasterize, shade_raster, shadow_mask, vertex_normals
+from studio.simulate.garments import adjust_labels, garment_offsets, skirt_mesh
 from studio.simulate.props import stool_mesh
 from studio.simulate.spec import SimSpec, SpecError
 
@@ -148,6 +149,7 @@ def clothing_labels(body: Body, person: dict, V0: np.ndarray) -> np.ndarray:
         bottom |= isin("lowerleg_l", "lowerleg_r") & (h > 0.24)
     lab[top] = LABEL_TOP
     lab[bottom] = LABEL_BOTTOM
+    lab = adjust_labels(lab, parts, P, h, person, LABEL_SKIN, LABEL_TOP, LABEL_BOTTOM)
     lab[isin("foot_l", "foot_r")] = LABEL_SHOES
     # hair: a cap, the head vertices within 7.5 cm of the top of the head in the first frame
     head = isin("head")
@@ -178,12 +180,15 @@ def person_albedo(labels: np.ndarray, person: dict, rng: np.random.Generator) ->
     return srgb_to_linear(np.clip(srgb, 0, 255)), float(tone)
 
 
-def dress(V: np.ndarray, F: np.ndarray, labels: np.ndarray, looseness: float) -> np.ndarray:
-    """Loose garments: move clothed vertices out along their normals by ``looseness`` metres."""
-    if looseness <= 0:
+def dress(V: np.ndarray, F: np.ndarray, labels: np.ndarray, looseness) -> np.ndarray:
+    """Loose garments: move clothed vertices out along their normals by ``looseness`` metres
+    (one value for every clothed vertex, or per vertex (V,) as :func:`garment_offsets` gives)."""
+    amount = np.asarray(looseness, dtype=np.float64)
+    if amount.ndim == 0:
+        amount = np.where(np.isin(labels, [LABEL_TOP, LABEL_BOTTOM]), float(amount), 0.0)
+    if not np.any(amount > 0):
         return V
     N = vertex_normals(V, F)
-    amount = np.where(np.isin(labels, [LABEL_TOP, LABEL_BOTTOM]), looseness, 0.0)
     return (V + N * amount[:, None]).astype(V.dtype)
 
 
@@ -323,8 +328,18 @@ class Scene:
         return self.body.vertices[frame]
 
     def dressed(self, frame: int) -> np.ndarray:
-        return dress(self.body.vertices[frame].astype(np.float64), self.body.faces, self.labels,
-                     float(self.spec["person"]["looseness"]))
+        person = self.spec["person"]
+        offsets = garment_offsets(self.labels, self.body.rest_height, person, LABEL_TOP, LABEL_BOTTOM)
+        return dress(self.body.vertices[frame].astype(np.float64), self.body.faces, self.labels, offsets)
+
+    def skirt(self, frame: int) -> tuple[np.ndarray, np.ndarray] | None:
+        """(vertices, faces) of the skirt of body frame ``frame``, or None (no skirt)."""
+        person = self.spec["person"]
+        if person["bottom"]["kind"] != "skirt":
+            return None
+        index = {n: i for i, n in enumerate(self.body.part_names)}
+        return skirt_mesh(self.body.vertices[frame].astype(np.float64), self.body.parts, index,
+                          self.body.rest_height, max(float(person["looseness"]), 0.01))
 
     @staticmethod
     def _light_penumbra_px(light, camera: Camera, V: np.ndarray) -> float:
@@ -359,6 +374,15 @@ class Scene:
         albedo, is_skin = self.albedo, self.is_skin.astype(np.float32)
         if normals is None:
             normals = vertex_normals(V, F)
+        skirt = self.skirt(frame)
+        if skirt is not None:  # part of the person (label 1), never skin
+            Vk, Fk = skirt
+            F = np.concatenate([F, Fk + len(V)])
+            normals = np.concatenate([normals, vertex_normals(Vk, Fk)])
+            V = np.concatenate([V, Vk])
+            colour = srgb_to_linear(np.asarray(self.spec["person"]["bottom"]["color"], np.float64))
+            albedo = np.concatenate([albedo, np.broadcast_to(colour, (len(Vk), 3))])
+            is_skin = np.concatenate([is_skin, np.zeros(len(Vk), np.float32)])
         n_person = len(F)
         stool = self.stool(frame)
         if stool is not None:  # the person and the stool are one scene: z-buffer and shadows

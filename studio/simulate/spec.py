@@ -15,6 +15,7 @@ never silently falls back to a default. Example::
     lights:  [{type: point, position: [1.5, -2.0, 3.2], intensity: 0.9}]
     ambient: 0.45
     person:  {skin_tone: null, top: {color: [40, 70, 150], sleeves: short}, looseness: 0.0}
+             # top.kind shirt | long_shirt | jacket; bottom.kind trousers | wide_trousers | skirt
     sensor:  {noise: 1.5, gamma: 2.2, bayer: false, flicker: 0.01, drop: 0.0, jitter_ns: 0}
 """
 
@@ -34,6 +35,11 @@ __all__ = ["SimSpec", "SpecError", "load_spec", "DEFAULTS", "SPEC_FORMAT", "SPEC
 
 SPEC_FORMAT = "studio.sim-spec"
 SPEC_VERSION = 1
+
+
+#: Garments (``person.top.kind``, ``person.bottom.kind``), see :mod:`studio.simulate.garments`.
+TOP_KINDS = ("shirt", "long_shirt", "jacket")
+BOTTOM_KINDS = ("trousers", "wide_trousers", "skirt")
 
 
 class SpecError(ValueError):
@@ -73,8 +79,8 @@ DEFAULTS: dict[str, Any] = {
     "ambient": 0.45,
     "person": {
         "skin_tone": None,
-        "top": {"color": [45, 75, 150], "sleeves": "short"},
-        "bottom": {"color": [60, 55, 50], "length": "long"},
+        "top": {"color": [45, 75, 150], "sleeves": "short", "kind": "shirt"},
+        "bottom": {"color": [60, 55, 50], "length": "long", "kind": "trousers"},
         "shoes": [30, 30, 32],
         "hair": [50, 35, 25],
         "looseness": 0.0,
@@ -195,6 +201,11 @@ def validate(data: dict, src: str) -> dict:
     if person["bottom"]["length"] not in ("short", "long"):
         raise SpecError(f"{src}: person.bottom.length must be short/long, got {person['bottom']['length']!r}")
     _number(person["looseness"], src, "person.looseness", 0.0, 0.2)
+    if person["top"]["kind"] not in TOP_KINDS:
+        raise SpecError(f"{src}: person.top.kind must be one of {'/'.join(TOP_KINDS)}, got {person['top']['kind']!r}")
+    if person["bottom"]["kind"] not in BOTTOM_KINDS:
+        raise SpecError(f"{src}: person.bottom.kind must be one of {'/'.join(BOTTOM_KINDS)}, "
+                        f"got {person['bottom']['kind']!r}")
     s = d["sensor"]
     _number(s["noise"], src, "sensor.noise", 0.0)
     _number(s["gamma"], src, "sensor.gamma", 0.1)

@@ -164,6 +164,10 @@ SEQUENCES = {
              "gender": 1.0, "age_years": (25.0, 40.0)},
     "clothing_poses": {"kind": "static", "poses": list(STATIC_POSES), "seed": 12,
                        "gender": 0.0, "age_years": (25.0, 45.0)},
+    # one woman striking 11 lab postures (the thesis' batches are 11 poses): the clothing batch
+    "clothing_11": {"kind": "lab", "poses": ["a_pose", "t_pose", "arms_overhead", "hands_on_hips", "arm_forward",
+                                             "wide_stance", "lunge", "torso_twist", "walk", "run", "arms_crossed"],
+                    "seed": 13, "gender": 1.0, "age_years": (25.0, 45.0)},
 }
 
 

@@ -9,7 +9,8 @@ toolkit derives from it and the simulator's truth::
     segmentation/   segmentation.json, background/<cam>/, skin_models/<cam>.npz,
                     <cam>/NNNNNN.png, skin/<cam>/NNNNNN.png, overlay/<cam>/NNNNNN.png,
                     floor_votes/NNNNNN.png
-    fit/            NNNNNN.json, NNNNNN.ply, overlay/<cam>/NNNNNN.png, sequence.json, batch.json
+    fit/            NNNNNN.json, NNNNNN.ply, overlay/<cam>/NNNNNN.png, sequence.json, batch.json,
+                    batch_neutral.ply
     light/          light.json
     report/         index.html, report.pdf, measurements.json, measurements.csv
     export/         body_neutral.obj/.glb, frames/NNNNNN.obj/.glb, joints.trc, measurements.csv, model_parameters.json
@@ -127,6 +128,11 @@ class Layout:
     @property
     def fit_batch(self) -> Path:
         return self.fit_dir / "batch.json"
+
+    @property
+    def fit_batch_mesh(self) -> Path:
+        """The batch body (shared shape) in the model's default pose."""
+        return self.fit_dir / "batch_neutral.ply"
 
     # ------------------------------------------------------------------ light, report, export
     @property

@@ -227,3 +227,29 @@ def test_every_frame_refused_says_why_not_run_fit(tmp_path):
         load_fits(tmp_path)
     with pytest.raises(FitError, match="no fitted frames — run `studio fit"):
         load_fits(tmp_path, frames=[4])
+
+
+def test_cli_batch_writes_batch_json_mesh_and_the_report_uses_it(tmp_path, capsys, monkeypatch):
+    """``studio fit --batch``: single-frame fits, then one shared shape (fit/batch.json with the
+    frames, per-frame poses and costs, fit/batch_neutral.ply); ``studio report`` measures it."""
+    import studio.cli.commands.fit as fit_cmd
+
+    make_session(tmp_path / "s", n_frames=2)
+    monkeypatch.setattr(fit_cmd, "QUICK", {k: v for k, v in TINY.to_dict().items() if k != "levels"})
+    assert main(["fit", str(tmp_path / "s"), "--frames", "0,1", "--gender", "female", "--quick", "--batch",
+                 "--clothing", "tight"]) == 0
+    out = capsys.readouterr().out
+    assert "batch of 2 frames [0, 1]: female, clothing tight" in out
+    obj = json.loads((tmp_path / "s" / "fit" / "batch.json").read_text())
+    assert obj["format"] == "studio.fit-batch" and obj["frames"] == [0, 1] and obj["clothing"] == "tight"
+    assert set(obj["poses"]) == set(obj["costs"]) == {"0", "1"} and obj["gender_margin"] is None
+    assert 1.4 < obj["measurements"]["stature"] < 2.0
+    assert (tmp_path / "s" / "fit" / "batch_neutral.ply").stat().st_size > 10000
+    assert main(["report", str(tmp_path / "s")]) == 0
+    html = (tmp_path / "s" / "report" / "index.html").read_text()
+    assert "batch shape" in html
+    table = json.loads((tmp_path / "s" / "report" / "measurements.json").read_text())
+    assert table["measurements"]["stature"]["shape_source"] == "batch"
+    assert table["measurements"]["stature"]["mean"] == pytest.approx(1000 * obj["measurements"]["stature"], abs=1.0)
+    assert main(["fit", str(tmp_path / "s"), "--batch", "--batch-frames", "1"]) == 1
+    assert "--batch-frames must be >= 2" in capsys.readouterr().err

@@ -171,6 +171,8 @@ def test_spec_errors(tmp_path):
              ({"fps": float("nan")}, r"fps must be a finite number, got nan"),
              ({"person": {"top": {"sleeves": "huge"}}}, r"person.top.sleeves"),
              ({"person": {"bottom": {"length": "x"}}}, r"person.bottom.length"),
+             ({"person": {"bottom": {"kind": "kilt"}}}, r"person.bottom.kind must be one of trousers/wide_trousers/skirt"),
+             ({"person": {"top": {"kind": "cape"}}}, r"person.top.kind must be one of shirt/long_shirt/jacket"),
              ({"person": {"skin_tone": 2}}, r"person.skin_tone must lie in"),
              ({"sensor": {"gamma": "a"}}, r"sensor.gamma must be a number"),
              ({"frames": [0]}, r"frames must be null or \[start, stop\]"),
@@ -321,3 +323,34 @@ def test_stool_is_foreground_labelled_object_and_casts_shadow(tmp_path):
         assert np.array_equal(r.labels == 2, both & ~person & ~stool & scene.backdrop(cam).floor)
     assert overlap > 20  # the person hides part of the stool in some view: the z-buffer was exercised
     assert scene.stool(1) is None and not np.any(scene.render(1, scene.cameras[0]).labels == 3)
+
+
+def test_garments_skirt_jacket_wide_trousers(tmp_path):
+    """Garment kinds over the shipped clothing body: a skirt fills the gap between the thighs
+    (person, never skin) and leaves the shins bare; a jacket and wide trousers stand further off
+    the body than a shirt and trousers; the true body is untouched."""
+    from studio.simulate import SAMPLES
+
+    def scene(top, bottom):
+        spec = {"format": "studio.sim-spec", "version": 1, "name": "g", "fps": 1, "background_frames": 0,
+                "body": str(SAMPLES / "clothing_poses" / "body.npz"),
+                "cameras": {"count": 1, "size": [160, 120], "focal_px": 140.0},
+                "person": {"skin_tone": 0.3, "looseness": 0.03, "top": {"kind": top, "sleeves": "short"},
+                           "bottom": {"kind": bottom, "length": "long"}}}
+        return Scene(load_spec(spec), seed=0)
+
+    plain, dressed = scene("shirt", "trousers"), scene("jacket", "skirt")
+    cam = plain.cameras[0]
+    a, b = plain.render(0, cam), dressed.render(0, cam)
+    assert (b.labels == 1).sum() > 1.1 * (a.labels == 1).sum()
+    assert b.skin.sum() > a.skin.sum()  # bare shins under the skirt
+    Vk, Fk = dressed.skirt(0)
+    assert Fk.max() < len(Vk) and plain.skirt(0) is None
+    skirt_px = silhouette(cam, Vk, Fk)
+    assert skirt_px.sum() > 100 and not (b.skin & skirt_px & ~silhouette(cam, dressed.dressed(0), dressed.body.faces)).any()
+    wide = scene("long_shirt", "wide_trousers")
+    legs = np.isin(plain.body.parts, [plain.body.part_names.index("lowerleg_l")])
+    off_plain = np.linalg.norm(plain.dressed(0)[legs] - plain.true_vertices(0)[legs], axis=1).mean()
+    off_wide = np.linalg.norm(wide.dressed(0)[legs] - wide.true_vertices(0)[legs], axis=1).mean()
+    assert off_wide > 1.8 * off_plain
+    assert np.array_equal(dressed.true_vertices(0), plain.true_vertices(0))

@@ -42,7 +42,7 @@ def test_unknown_sequence_is_rejected(tmp_path):
         build_truth(tmp_path, ["jog"])
 
 
-@pytest.mark.parametrize("name", ["walk", "clothing_poses", "mono_shadow"])
+@pytest.mark.parametrize("name", ["walk", "clothing_poses", "clothing_11", "mono_shadow"])
 def test_sample_sequences_are_compact_and_plausible(name):
     spec = load_spec(ROOT / name / "spec.yaml")
     body = load_body(spec.body_path)
@@ -53,7 +53,8 @@ def test_sample_sequences_are_compact_and_plausible(name):
     # feet on the floor in every frame, the person inside the capture volume
     np.testing.assert_allclose(body.vertices[..., 2].min(axis=1), 0.0, atol=2e-4)
     assert np.abs(body.vertices[..., :2]).max() < 1.5
-    # per-frame heights close to stature (walking bends knees a little)
+    # per-frame heights close to stature (walking bends knees a little, clothing_11's lunge ~17 cm)
     tops = body.vertices[..., 2].max(axis=1)
-    assert np.all(tops < meas["stature"] + 0.45) and np.all(tops > meas["stature"] - 0.15)
+    low = 0.2 if name == "clothing_11" else 0.15
+    assert np.all(tops < meas["stature"] + 0.45) and np.all(tops > meas["stature"] - low)
     assert spec.body_path.stat().st_size < 3e6

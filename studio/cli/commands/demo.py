@@ -16,7 +16,8 @@ DEFAULT_SPEC = SAMPLES / "walk" / "spec.yaml"
 NOT_DONE = (
     "Not done yet by the demo (later issues):\n"
     "  - the fit with the shadow term (studio fit --shadows, thesis eq. 5.7): the demo estimates the light only\n"
-    "  - shape under loose clothing: the clothing-robust cost and the multi-pose batch fit (thesis ch. 6)\n"
+    "  - the shape under clothing (thesis ch. 6) only with --batch: studio demo --batch --spec "
+    "studio/samples/clothing_poses --frames 0:6\n"
     "  - the demo fits a subset of the walk frames (--frames) to finish in a few minutes on 2 cores"
 )
 
@@ -39,6 +40,9 @@ def register(subparsers) -> None:
     p.add_argument("--gender", default="female", choices=["auto", "female", "male", "neutral"],
                    help="body model (default: %(default)s; 'auto' fits both on the first frame, slower)")  # fmt: skip
     p.add_argument("--quick", action="store_true", help="fewer particles and evaluations")
+    p.add_argument("--batch", action="store_true",
+                   help="after the single-frame fits, one shape shared by the frames under clothing (thesis ch. 6; "
+                        "e.g. --spec studio/samples/clothing_poses --frames 0:6)")  # fmt: skip
     p.set_defaults(func=run)
 
 
@@ -76,8 +80,18 @@ def run(args) -> int:
     with Progress(*cols) as bar:
         task = bar.add_task(f"3/4 fit {len(frames)} frames ({args.workers} workers)", total=len(frames))
         try:
-            summary = fit_session(ws, frames=frames, gender=args.gender, workers=args.workers,
-                                  options=options, force=True, progress=lambda d, n: bar.update(task, completed=d, total=n))
+            if args.batch:
+                from studio.fit.batch_session import fit_batch_session
+
+                batch = fit_batch_session(ws, frames=frames, clothing="auto", gender=args.gender,
+                                          workers=args.workers, single_options=options, chain_length=1, force=True,
+                                          progress=lambda d, n: bar.update(task, completed=d, total=n))
+                summary = {"gender": batch["gender"]}
+                print(f"batch: {batch['gender']}, clothing {batch['clothing']}, stature "
+                      f"{batch['measurements']['stature'] * 1000:.0f} mm over frames {batch['frames']}")
+            else:
+                summary = fit_session(ws, frames=frames, gender=args.gender, workers=args.workers, options=options,
+                                      force=True, progress=lambda d, n: bar.update(task, completed=d, total=n))
         except FitError as exc:
             raise CommandError(str(exc)) from None
     t_light = time.perf_counter()

@@ -42,6 +42,15 @@ def register(subparsers) -> None:
                         "from the silhouettes, estimate the light (studio light) and fit again with the shadows")  # fmt: skip
     p.add_argument("--shadow-weight", type=float, default=1.0,
                    help="weight of the shadow term, whose views are averaged (default: %(default)s)")  # fmt: skip
+    p.add_argument("--batch", action="store_true",
+                   help="after the single-frame fits, fit one shape shared by several frames under clothing "
+                        "(thesis ch. 6): gender by batch, fit/batch.json and fit/batch_neutral.ply")  # fmt: skip
+    p.add_argument("--clothing", default="auto", choices=["auto", "tight", "loose"],
+                   help="--batch: clothing-robust cost; auto fits loose and calls it tight when the body fills "
+                        "the clothes (default: %(default)s)")  # fmt: skip
+    p.add_argument("--batch-frames", type=int, default=8,
+                   help="--batch without --frames: how many frames to choose (good quality, diverse postures; "
+                        "default: %(default)s)")  # fmt: skip
     p.set_defaults(func=run)
 
 
@@ -64,10 +73,17 @@ def run(args) -> int:
         raise CommandError(str(exc)) from None
     frames = select_frames(args.frames, ws.frame_indices)
     options = FitOptions(**QUICK) if args.quick else FitOptions()
+    if args.shadows and args.batch:
+        raise CommandError("--shadows and --batch together: the batch fit has no shadow term yet; "
+                           "run `studio fit --shadows` and `studio fit --batch` separately")
     if args.shadows and args.shadow_weight < 0:
         raise CommandError(f"--shadow-weight must be >= 0, got {args.shadow_weight}")
     if args.shadows and not ws.layout.light_json.is_file():
         _light_first(ws, args, frames, options)
+    if args.batch:
+        from studio.fit.batch_session import run_batch_command
+
+        return run_batch_command(args, ws, frames, options)
     with Progress("[progress.description]{task.description}", BarColumn(), MofNCompleteColumn(),
                   TimeElapsedColumn()) as bar:
         n = len(frames) if frames is not None else len(ws.frame_indices)

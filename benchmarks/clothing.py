@@ -1,0 +1,337 @@
+"""Shape under clothing: the multi-pose batch vs single-pose fits (thesis ch. 6, §6.4).
+
+Generated Anny people (seeds from 2000 up, never used for tuning; both sexes alternate, adult
+ages, Anny's population statures and BMIs), each in ``--poses`` lab postures (standing families
+of ``studio.simulate.truth_build.LAB_POSES``, jittered, random heading), rendered twice: **tight**
+(short sleeves, trousers, no looseness) and **loose** (3.5 cm, a garment drawn per person: long
+shirt, jacket, wide trousers, skirt). Each session is segmented, every frame fitted alone from its
+silhouettes (``studio fit``'s single-frame fit, gender auto on the first frame), then the batch
+(``studio.fit.batch_session.fit_batch_session``: clothing cost of the condition, gender by batch)
+over the frames the quality gates pass; single-pose figures are over the same frames.
+
+Per subject × condition (cached as JSON: a rerun only does what is missing):
+
+- stature, chest, waist and hip girth errors of the batch shape and of each single-pose fit
+  against the true body measured by the same definitions, and the mean surface distance of the
+  batch body (in each frame's batch pose) and of each single-frame body to the true mesh;
+- shape constancy (§6.4.2): the spread of the single-pose measurements across poses relative to
+  the spread across subjects;
+- gender: single pose (neutral body of the frame's fit, then female and male shape steps with the
+  pose fixed, §6.4.5), vote (majority of the single poses, ties to the summed margin), batch;
+- skin: precision / recall against the simulator's true skin pixels of the segmentation's
+  self-trained classifier (fig. 6.3 box) and of the session-adapted one (fitted hands and face);
+  on the real SFA / abdomen masks via ``benchmarks/segmentation.py``'s skin section.
+
+Anchors: thesis 86 / 90.6 / 94.3 % gender accuracy single / vote / batch over 53 trials of 11
+poses; issue targets: loose batch stature within 10 mm, surface ≤ 15 mm median, batch better than
+single-pose on every measurement, gender by batch ≥ 98 %.
+
+    ANNY_CACHE_DIR=~/.cache/anny /path/to/python-with-anny benchmarks/clothing.py build --subjects 20 --poses 11
+    .venv/bin/python benchmarks/clothing.py run --subjects 20 --poses 11 --workers 2
+    .venv/bin/python benchmarks/clothing.py table
+    # everyday subset: 2 subjects (one of each sex) × 4 postures, tight and loose
+    ... build --quick ; ... run --quick ; ... table
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))
+
+FIRST_SEED = 2000
+FAMILIES = ("a_pose", "t_pose", "arms_overhead", "hands_on_hips", "arm_forward", "wide_stance", "lunge",
+            "torso_twist", "walk", "run", "arms_crossed")
+QUICK_FAMILIES = ("t_pose", "hands_on_hips", "wide_stance", "walk")
+GARMENTS = (("long_shirt", "trousers"), ("jacket", "wide_trousers"), ("shirt", "skirt"), ("jacket", "trousers"),
+            ("long_shirt", "wide_trousers"))
+MEASURES = ("stature", "chest_circumference", "waist_circumference", "hip_circumference")
+THESIS_GENDER = {"single": 86.0, "vote": 90.6, "batch": 94.3}
+
+
+#: ``full`` or ``quick`` (set by ``--quick``): the two runs keep separate caches.
+RUN = {"name": "full"}
+
+
+def bench_root() -> Path:
+    from studio.simulate.samples import cache_root
+
+    return cache_root() / "bench" / "clothing" / RUN["name"]
+
+
+def subjects(n: int, n_poses: int, quick: bool) -> list[dict]:
+    fams = QUICK_FAMILIES if quick else FAMILIES
+    out = []
+    for i in range(n):
+        rng = np.random.default_rng(FIRST_SEED + i)
+        female = bool(i % 2)
+        garments = [g for g in GARMENTS if female or g[1] != "skirt"]
+        top, bottom = garments[int(rng.integers(len(garments)))]
+        out.append({
+            "name": f"subject_{i:03d}", "seed": FIRST_SEED + i, "gender": float(female),
+            "poses": [fams[(i + j) % len(fams)] for j in range(min(n_poses, len(fams)))],
+            "skin_tone": round(float(rng.uniform(0.05, 0.95)), 2),
+            "top": [int(v) for v in rng.integers(20, 220, 3)], "bottom": [int(v) for v in rng.integers(20, 160, 3)],
+            "garment": [top, bottom], "sleeves": str(rng.choice(["short", "long"])),
+        })
+    return out
+
+
+def _spec(p: dict, condition: str) -> str:
+    if condition == "tight":
+        person = (f"  top: {{color: {p['top']}, sleeves: short, kind: shirt}}\n"
+                  f"  bottom: {{color: {p['bottom']}, length: long, kind: trousers}}\n  looseness: 0.0\n")
+    else:
+        top, bottom = p["garment"]
+        person = (f"  top: {{color: {p['top']}, sleeves: {p['sleeves']}, kind: {top}}}\n"
+                  f"  bottom: {{color: {p['bottom']}, length: long, kind: {bottom}}}\n  looseness: 0.035\n")
+    return f"""format: studio.sim-spec
+version: 1
+name: clothing_{p['name']}_{condition}
+body: ../body.npz
+fps: 1
+seed: {p['seed']}
+background_frames: 5
+cameras: {{count: 4, size: [656, 490], radius: 3.6, height: 2.3, focal_px: 560}}
+lights:
+  - {{type: point, position: [1.1, -1.5, 3.6], intensity: 0.85}}
+ambient: 0.45
+person:
+  skin_tone: {p['skin_tone']}
+{person}"""
+
+
+def build(args) -> int:
+    """Truth bodies (Anny) and the two specs of every subject (needs torch + anny)."""
+    from rigs.atomic import atomic_write_text
+    from studio.simulate.truth_build import build_truth
+
+    root = bench_root()
+    todo = {}
+    for p in subjects(args.subjects, args.poses, args.quick):
+        folder = root / p["name"]
+        for cond in ("tight", "loose"):
+            (folder / cond).mkdir(parents=True, exist_ok=True)
+            atomic_write_text(folder / cond / "spec.yaml", _spec(p, cond))
+        if not (folder / "body.npz").is_file():
+            todo[p["name"]] = {"kind": "lab", "poses": p["poses"], "seed": p["seed"], "gender": p["gender"],
+                               "age_years": (20.0, 60.0)}
+    if todo:
+        build_truth(root, list(todo), sequences=todo)
+    print(f"{args.subjects} subjects ready in {root} ({len(todo)} built now)")
+    return 0
+
+
+def _gender_single(frame, options) -> dict:
+    """§6.4.5 on one pose: the frame's fit → neutral body → female / male shape steps, pose fixed."""
+    from studio.body import BodyModel
+    from studio.fit.batch import compare_genders, convert_shape
+
+    neutral = BodyModel.load("neutral")
+    shape = convert_shape(BodyModel.load(frame.gender), frame.shape, neutral)
+    costs = {g: c for g, (_, _, c) in compare_genders([frame], neutral, shape, frame.pose[None], options).items()}
+    return {"gender": min(costs, key=costs.get), "costs": costs}
+
+
+def run_one(p: dict, condition: str, workers: int) -> dict:
+    from rigs.imageio import read_image
+    from studio.body import BodyModel, measure
+    from studio.fit import load_fits
+    from studio.fit.batch import BatchFrame, BatchOptions
+    from studio.fit.batch_session import fit_batch_session, session_skin
+    from studio.fit.evaluate import surface_distance, true_mesh
+    from studio.report.measurements import load_truth
+    from studio.segment import segment_session
+    from studio.segment.metrics import binary_scores
+    from studio.simulate import ensure_rendered
+    from studio.workspace import Workspace
+
+    folder = bench_root() / p["name"] / condition
+    t0 = time.perf_counter()
+    session = ensure_rendered(folder / "spec.yaml", seed=0, cache_dir=folder / "render")
+    segment_session(session, workers=1)
+    t_seg = time.perf_counter() - t0
+    ws = Workspace.open(session)
+    frames = list(range(len(p["poses"])))
+    options = BatchOptions(clothing=condition)
+    # every frame fitted alone; the batch takes the frames the quality gates pass (choose_frames)
+    batch = fit_batch_session(ws, n_frames=len(frames), clothing=condition, gender="auto", workers=workers,
+                              chain_length=1, options=options)
+    truth = load_truth(ws.layout)
+    true_m = {k: truth["studio"][k] for k in MEASURES}
+    fits = load_fits(ws, frames)
+    bmodel = BodyModel.load(batch["gender"])
+    bshape = np.asarray(batch["shape"])
+    bm = measure(bmodel, bshape)
+    out = {"subject": p["name"], "condition": condition, "sex": truth["sex"], "garment": p["garment"] if
+           condition == "loose" else ["shirt", "trousers"], "poses": p["poses"], "frames": batch["frames"],
+           "batch": {"gender": batch["gender"], "gender_costs": batch["gender_costs"],
+                     "margin": batch["gender_margin"], "errors_mm": {k: 1000 * (bm[k] - true_m[k]) for k in MEASURES},
+                     "consistency": batch["consistency"], "timings": batch["timings"]},
+           "single": {}, "time_segment_s": t_seg, "time_batch_s": batch["wall_time"],
+           "frames_left_out": {str(f): fits[f].status for f in frames if f not in batch["frames"]}}
+    surf_b = []
+    cams = ws.cameras
+    opts_gender = BatchOptions(clothing=condition)
+    for f in batch["frames"]:
+        fit = fits[f]
+        m = BodyModel.load(fit.gender)
+        Vt = true_mesh(ws.path, f)
+        sm = measure(m, fit.shape)
+        surf_s = 1000 * surface_distance(m.vertices(fit.shape, fit.pose), m.faces, Vt, m.faces)
+        surf_b.append(1000 * surface_distance(bmodel.vertices(bshape, np.asarray(batch["poses"][str(f)])),
+                                              bmodel.faces, Vt, bmodel.faces))
+        masks = ws.person_masks(f)
+        bf = BatchFrame(f, cams, masks, None, fit.pose, fit.shape, fit.gender)
+        g = _gender_single(bf, opts_gender)
+        out["single"][str(f)] = {"gender_fit": fit.gender, "status": fit.status, "surface_mm": surf_s,
+                                 "errors_mm": {k: 1000 * (sm[k] - true_m[k]) for k in MEASURES},
+                                 "measures_m": {k: sm[k] for k in MEASURES}, "gender_single": g["gender"],
+                                 "gender_single_costs": g["costs"]}
+    out["batch"]["surface_mm"] = float(np.median(surf_b))
+    out["batch"]["surface_per_frame_mm"] = surf_b
+    # skin: segmentation's self-trained model and the session-adapted one vs the true skin
+    cameras_of = {f: cams for f in batch["frames"]}
+    adapted, info = session_skin(ws, fits, batch["frames"], cameras_of)
+    pred_a, pred_s, truth_s = [], [], []
+    for f in batch["frames"]:
+        for k, c in enumerate(cams):
+            person = ws.person_masks(f)[k]
+            truth_s.append((read_image(ws.layout.truth_skin(c.name, f)) > 0) & person)
+            seg = ws.layout.skin(c.name, f)
+            pred_s.append(read_image(seg) > 0 if seg.is_file() else np.zeros_like(person))
+            pred_a.append(adapted[f][k] if adapted[f][k] is not None else np.zeros_like(person))
+    out["skin"] = {"segmentation": binary_scores(pred_s, truth_s), "session": binary_scores(pred_a, truth_s),
+                   "session_info": info}
+    return out
+
+
+def run(args) -> int:
+    root = bench_root()
+    results = root / "results"
+    results.mkdir(parents=True, exist_ok=True)
+    for p in subjects(args.subjects, args.poses, args.quick):
+        if not (root / p["name"] / "body.npz").is_file():
+            print(f"{p['name']}: no truth body — run `build` first with torch + anny", file=sys.stderr)
+            return 1
+        for cond in args.conditions:
+            path = results / f"{p['name']}_{cond}.json"
+            if path.is_file():
+                continue
+            t = time.perf_counter()
+            r = run_one(p, cond, args.workers)
+            r["time_total_s"] = time.perf_counter() - t
+            from rigs.atomic import atomic_write_json
+
+            atomic_write_json(path, r)
+            print(f"{p['name']} {cond}: done in {r['time_total_s']:.0f} s", flush=True)
+    return table(args)
+
+
+def _vote(single: dict) -> str:
+    votes = [s["gender_single"] for s in single.values()]
+    f, m = votes.count("female"), votes.count("male")
+    if f != m:
+        return "female" if f > m else "male"
+    margin = sum(s["gender_single_costs"]["male"] - s["gender_single_costs"]["female"] for s in single.values())
+    return "female" if margin > 0 else "male"
+
+
+def summarise(rows: list[dict]) -> dict:
+    out = {}
+    for cond in ("tight", "loose"):
+        rs = [r for r in rows if r["condition"] == cond]
+        if not rs:
+            continue
+        s = {"subjects": len(rs), "frames": sum(len(r["single"]) for r in rs)}
+        for k in MEASURES:
+            b = np.array([r["batch"]["errors_mm"][k] for r in rs])
+            si = np.array([v["errors_mm"][k] for r in rs for v in r["single"].values()])
+            s[k] = {"batch_mean_abs": float(np.mean(np.abs(b))), "batch_mean": float(np.mean(b)),
+                    "single_mean_abs": float(np.mean(np.abs(si))), "single_mean": float(np.mean(si))}
+        s["surface_mm"] = {"batch_median": float(np.median([r["batch"]["surface_mm"] for r in rs])),
+                           "single_median": float(np.median([v["surface_mm"] for r in rs for v in r["single"].values()]))}
+        # shape constancy (§6.4.2): spread across poses vs across subjects, per measurement
+        cons = {}
+        for k in MEASURES:
+            per = [np.array([v["measures_m"][k] for v in r["single"].values()]) for r in rs]
+            within = float(np.mean([x.var() for x in per]))
+            across = float(np.var([x.mean() for x in per])) if len(per) > 1 else None
+            cons[k] = {"within_pose_sd_mm": 1000 * np.sqrt(within),
+                       "across_subject_sd_mm": None if across is None else 1000 * np.sqrt(across)}
+        s["constancy"] = cons
+        single_ok = [v["gender_single"] == r["sex"] for r in rs for v in r["single"].values()]
+        s["gender_pct"] = {"single": 100 * float(np.mean(single_ok)),
+                           "vote": 100 * float(np.mean([_vote(r["single"]) == r["sex"] for r in rs])),
+                           "batch": 100 * float(np.mean([r["batch"]["gender"] == r["sex"] for r in rs]))}
+        s["flagged"] = sum(bool(r["batch"]["consistency"]["flagged"]) for r in rs)
+        s["skin"] = {k: {m: float(np.mean([r["skin"][k][m] for r in rs])) for m in ("precision", "recall")}
+                     for k in ("segmentation", "session")}
+        s["time_batch_s"] = float(np.mean([r["time_batch_s"] for r in rs]))
+        out[cond] = s
+    return out
+
+
+def table(args) -> int:
+    from rigs.atomic import atomic_write_json
+
+    rows = [json.loads(p.read_text()) for p in sorted((bench_root() / "results").glob("*.json"))]
+    if not rows:
+        print("no results yet: run `build` then `run`")
+        return 1
+    summary = summarise(rows)
+    for cond, s in summary.items():
+        print(f"\n== {cond} clothing: {s['subjects']} subjects, {s['frames']} frames")
+        print(f"{'measure':<22} {'batch |err| mm':>15} {'single |err| mm':>16} {'batch bias':>11} {'single bias':>12}")
+        for k in MEASURES:
+            m = s[k]
+            print(f"{k:<22} {m['batch_mean_abs']:>15.1f} {m['single_mean_abs']:>16.1f} {m['batch_mean']:>+11.1f} "
+                  f"{m['single_mean']:>+12.1f}")
+        print(f"{'surface (median) mm':<22} {s['surface_mm']['batch_median']:>15.1f} {s['surface_mm']['single_median']:>16.1f}")
+        print("shape constancy (sd across poses / across subjects, mm): " + ", ".join(
+            f"{k.split('_')[0]} {v['within_pose_sd_mm']:.1f}/"
+            f"{'–' if v['across_subject_sd_mm'] is None else format(v['across_subject_sd_mm'], '.1f')}"
+            for k, v in s["constancy"].items()))
+        g = s["gender_pct"]
+        print(f"gender accuracy single / vote / batch: {g['single']:.0f} / {g['vote']:.0f} / {g['batch']:.0f} % "
+              f"(thesis {THESIS_GENDER['single']} / {THESIS_GENDER['vote']} / {THESIS_GENDER['batch']} %)")
+        sk = s["skin"]
+        print(f"skin P/R: segmentation (self-trained box) {sk['segmentation']['precision']:.2f}/"
+              f"{sk['segmentation']['recall']:.2f}, session-adapted {sk['session']['precision']:.2f}/"
+              f"{sk['session']['recall']:.2f}; batches flagged as two people: {s['flagged']}; "
+              f"batch time {s['time_batch_s']:.0f} s")
+    if getattr(args, "real_skin", False):
+        sys.path.insert(0, str(ROOT / "benchmarks"))
+        from segmentation import bench_skin
+
+        summary["real_skin"] = bench_skin()
+    atomic_write_json(bench_root() / "summary.json", summary)
+    print(f"\nsummary: {bench_root() / 'summary.json'}")
+    return 0
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("step", choices=["build", "run", "table"])
+    ap.add_argument("--subjects", type=int, default=20)
+    ap.add_argument("--poses", type=int, default=11)
+    ap.add_argument("--quick", action="store_true", help="2 subjects × 4 postures (overrides --subjects/--poses)")
+    ap.add_argument("--conditions", nargs="+", default=["tight", "loose"], choices=["tight", "loose"])
+    ap.add_argument("--workers", type=int, default=2)
+    ap.add_argument("--real-skin", action="store_true", help="also the skin classifier on ../shared/data/skin")
+    args = ap.parse_args(argv)
+    if args.quick:
+        args.subjects, args.poses = 2, 4
+        RUN["name"] = "quick"
+    return {"build": build, "run": run, "table": table}[args.step](args)
+
+
+if __name__ == "__main__":
+    sys.exit(main())

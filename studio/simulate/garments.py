@@ -1,0 +1,104 @@
+"""Garments of the simulated person over the true body (for the clothing fit, thesis ch. 6).
+
+The true (undressed) body stays the truth; garments only change what the cameras see:
+
+- ``top.kind``: ``shirt`` (the torso above the waist, sleeves per ``top.sleeves``), ``long_shirt``
+  (down to mid-thigh), ``jacket`` (down to the hips, long sleeves, twice as loose);
+- ``bottom.kind``: ``trousers``, ``wide_trousers`` (looser toward the hem, up to 4× at the
+  ankle), ``skirt`` (a separate flared tube from the waist to above the knees around both legs,
+  bare legs below: :func:`skirt_mesh`).
+
+Clothed vertices move out along their normals by the per-vertex amount of
+:func:`garment_offsets` (``person.looseness`` metres scaled per garment); the skirt is an extra
+mesh rendered with the body (person label, never skin).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+__all__ = ["HEMS", "adjust_labels", "garment_offsets", "skirt_mesh"]
+
+#: Rest height (fraction of stature) of the hem of each long garment.
+HEMS = {"long_shirt": 0.42, "jacket": 0.47, "skirt": 0.33}
+#: Looseness factor per garment (× ``person.looseness``).
+FACTORS = {"shirt": 1.0, "long_shirt": 1.2, "jacket": 1.8, "trousers": 1.0, "wide_trousers": 1.0, "skirt": 0.0}
+WAIST = 0.575
+
+
+def adjust_labels(labels: np.ndarray, parts: np.ndarray, part_index: dict, rest_height: np.ndarray, person: dict,
+                  skin: int, top: int, bottom: int) -> np.ndarray:
+    """Material labels (V,) with the garment kinds applied (see the module doc)."""
+    lab = labels.copy()
+    legs = np.isin(parts, [part_index[n] for n in ("pelvis", "upperleg_l", "upperleg_r")])
+    kind = person["top"]["kind"]
+    if kind in ("long_shirt", "jacket"):
+        lab[legs & (rest_height > HEMS[kind])] = top
+    if kind == "jacket":
+        arms = np.isin(parts, [part_index[n] for n in ("upperarm_l", "upperarm_r", "lowerarm_l", "lowerarm_r")])
+        lab[arms] = top
+    if person["bottom"]["kind"] == "skirt":
+        lower = np.isin(parts, [part_index[n] for n in ("lowerleg_l", "lowerleg_r")])
+        lab[lower] = skin  # bare legs under the skirt
+        lab[legs & (rest_height < HEMS["skirt"])] = skin
+    return lab
+
+
+def garment_offsets(labels: np.ndarray, rest_height: np.ndarray, person: dict, top: int, bottom: int) -> np.ndarray:
+    """How far (m, (V,)) each vertex's garment stands off the body."""
+    loose = float(person["looseness"])
+    out = np.zeros(len(labels))
+    out[labels == top] = loose * FACTORS[person["top"]["kind"]]
+    kind = person["bottom"]["kind"]
+    b = labels == bottom
+    if kind == "wide_trousers":
+        flare = 1.0 + 3.0 * np.clip((0.5 - rest_height.astype(np.float64)) / 0.45, 0.0, 1.0)
+        out[b] = loose * flare[b]
+    else:
+        out[b] = loose * FACTORS[kind]
+    return out
+
+
+def skirt_mesh(V: np.ndarray, parts: np.ndarray, part_index: dict, rest_height: np.ndarray, looseness: float,
+               n_theta: int = 36, n_rings: int = 10) -> tuple[np.ndarray, np.ndarray]:
+    """A flared tube (vertices (n_rings · n_theta, 3), faces) around the hips and both thighs of
+    the posed body ``V``, from the waist to the skirt's hem, standing ``looseness`` off at the
+    waist and twice that at the hem; outward-facing triangles."""
+    h = rest_height.astype(np.float64)
+    band = np.isin(parts, [part_index[n] for n in ("pelvis", "upperleg_l", "upperleg_r")])
+    top_v = band & (np.abs(h - 0.56) < 0.015)
+    hem_v = band & (np.abs(h - HEMS["skirt"]) < 0.015)
+    z_top, z_hem = float(V[top_v, 2].mean()), float(V[hem_v, 2].mean())
+    inside = band & (h >= HEMS["skirt"] - 0.02) & (h <= 0.58)
+    P = V[inside]
+    zs = np.linspace(z_top, z_hem, n_rings)
+    dz = max(abs(z_top - z_hem) / (n_rings - 1), 0.01)
+    theta = np.linspace(0.0, 2 * np.pi, n_theta, endpoint=False)
+    U = np.stack([np.cos(theta), np.sin(theta)], axis=1)
+    rings = []
+    for j, z in enumerate(zs):
+        near = P[np.abs(P[:, 2] - z) < dz]
+        if len(near) < 3:
+            near = P[np.argsort(np.abs(P[:, 2] - z))[:50]]
+        xy = near[:, :2]
+        c = xy.mean(axis=0)
+        support = ((xy - c) @ U.T).max(axis=0)  # (n_theta,) extent of the body along each direction
+        t = j / max(n_rings - 1, 1)
+        r = support + looseness * (1.0 + t)
+        rings.append(np.column_stack([c + U * r[:, None], np.full(n_theta, z)]))
+    Vs = np.concatenate(rings)
+    faces = []
+    for j in range(n_rings - 1):
+        for i in range(n_theta):
+            a, b = j * n_theta + i, j * n_theta + (i + 1) % n_theta
+            c_, d = a + n_theta, b + n_theta
+            faces += [(a, c_, b), (b, c_, d)]
+    Fs = np.asarray(faces, dtype=np.int32)
+    # outward: the face normals point away from the ring centres
+    tri = Vs[Fs]
+    n = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
+    centre = np.concatenate([np.repeat(r[:, :2].mean(axis=0)[None], n_theta, axis=0) for r in rings])
+    radial = tri.mean(axis=1)[:, :2] - centre[Fs[:, 0]]
+    if np.mean(np.einsum("ij,ij->i", n[:, :2], radial)) < 0:
+        Fs = Fs[:, [0, 2, 1]]
+    return Vs.astype(np.float64), Fs

@@ -45,7 +45,8 @@ SURVIVED = {"survived", "no tests", "suspicious"}
 
 
 def load_plan(path: Path = HERE / "modules.toml") -> tuple[dict[str, dict], list[dict]]:
-    """Modules (name → files, tests, optional mutant-name patterns) and the equivalent-mutant list."""
+    """Modules (name → files, tests, optional pytest ``-k`` ``select`` and mutant-name patterns
+    ``mutants``) and the equivalent-mutant list."""
     data = tomllib.loads(path.read_text("utf-8"))
     modules = data.get("modules", {})
     for name, spec in modules.items():
@@ -75,7 +76,7 @@ def prepare_scratch(name: str, spec: dict) -> Path:
     config = {
         "source_paths": list(PACKAGES),
         "only_mutate": list(spec["files"]),
-        "pytest_add_cli_args_test_selection": list(spec["tests"]),
+        "pytest_add_cli_args_test_selection": list(spec["tests"]) + (["-k", spec["select"]] if spec.get("select") else []),
         "pytest_add_cli_args": ["-p", "no:cacheprovider", "-x", "-q", "--no-header"],
         "timeout_multiplier": 10.0,
         "use_git_change_detection": False,
@@ -175,6 +176,12 @@ def summarise(name: str, found: dict, equivalents: list[dict], seconds: float) -
     }
 
 
+def tracked_at(rev: str, path: str) -> bool:
+    """Whether ``path`` exists in git revision ``rev``."""
+    out = subprocess.run(["git", "cat-file", "-e", f"{rev}:{path}"], cwd=REPO, capture_output=True)
+    return out.returncode == 0
+
+
 def git_commit() -> str:
     out = subprocess.run(["git", "rev-parse", "--short", "HEAD"], cwd=REPO, capture_output=True, text=True)
     dirty = subprocess.run(["git", "status", "--porcelain", "--untracked-files=no"], cwd=REPO,
@@ -209,6 +216,9 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--module", action="append", help="module name from modules.toml (repeatable); default all")
     parser.add_argument("--list", action="store_true", help="print the modules and their tests, then exit")
     parser.add_argument("--reset-baseline", action="store_true", help="record this run as the module's 'before'")
+    parser.add_argument("--tests-at", metavar="REV",
+                        help="use only the module's test files that exist at git REV (a 'before' run with "
+                             "the tests of an earlier commit; implies --reset-baseline)")
     parser.add_argument("--output", type=Path, default=RESULTS / "mutation.json")
     args = parser.parse_args(argv)
 
@@ -227,6 +237,9 @@ def main(argv: list[str] | None = None) -> int:
         results["modules"] = json.loads(args.output.read_text("utf-8")).get("modules", {})
     for name in names:
         spec = modules[name]
+        if args.tests_at:
+            spec = dict(spec, tests=[t for t in spec["tests"] if tracked_at(args.tests_at, t)])
+            args.reset_baseline = True
         patterns = list(spec.get("mutants", []))
         print(f"== {name}: {', '.join(spec['files'])} with {len(spec['tests'])} test file(s)", flush=True)
         folder = prepare_scratch(name, spec)

@@ -94,3 +94,32 @@ def test_pose_bounds():
     np.testing.assert_allclose(lo[:3], [-0.05, -0.65, -0.6])
     np.testing.assert_allclose(hi[:3], [0.45, -0.15, 0.3])
     assert model.pose_limits[2, 0] == -10.0  # the model's own limits are left alone
+
+
+def test_integer_inputs_are_taken_as_real_numbers(scene):
+    """A base shape or parameters given as integers are not truncated when the free shape
+    coefficients (fractions of a standard deviation) are written in."""
+    model, cams, targets, shape, pose = scene
+    n = len(shape)
+    obj = FrameObjective(model, cams, targets, [0] * n, n_shape_free=2)
+    x = obj.pack([0] * n, [0] * POSE_SIZE)
+    assert x.dtype == np.float64 and x.shape == (POSE_SIZE + 2,)
+    x[POSE_SIZE:] = [0.25, -1.5]
+    shapes, _ = obj.split(x)
+    np.testing.assert_array_equal(shapes[0, :3], [0.25, -1.5, 0.0])
+
+
+def test_cylinder_meshes_follow_a_turned_root_with_their_own_sides(scene):
+    """The cone model's chain (rest joints precomputed) equals ``CylinderModel.mesh`` for a body
+    turned and tilted at the root, with the objective's number of sides."""
+    from studio.fit.objective import CylinderObjective
+
+    model, cams, targets, shape, pose = scene
+    obj = CylinderObjective(model, cams, targets, shape, sides=8)
+    p = pose.copy()
+    p[:6] = [0.2, -0.1, 0.05, 0.3, -0.2, 1.0]
+    p[6] = 0.4
+    V = obj.meshes(p[None])[0]
+    Vr, Fr = obj.cylinder.mesh(p, sides=8)
+    np.testing.assert_allclose(V, Vr, rtol=0, atol=1e-12)
+    np.testing.assert_array_equal(obj.faces, Fr)

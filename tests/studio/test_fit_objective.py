@@ -57,6 +57,8 @@ def test_cost_holds_every_reported_term(scene):
         assert sorted(t_out["silhouette_per_view"]) == ["view0", "view1"]  # the targets' names
         assert t_out["total"] == pytest.approx(t_out["silhouette"] + w * (1.0 + 4.0), rel=1e-12)
         assert t_out["level"] == level
+        if level == 0:
+            assert obj.terms(x_out) == t_out  # level 0 (full resolution) by default
         costs = obj(np.stack([x_in, x_out]), level)  # the optimised cost
         np.testing.assert_allclose(costs, [t_in["total"], t_out["total"]], rtol=1e-12)
         assert costs[1] - costs[0] == pytest.approx(w * (0.1 / SIGMA_LIMIT) ** 2, rel=1e-9)
@@ -75,11 +77,11 @@ def test_pack_split_and_batches(scene):
     np.testing.assert_array_equal(shapes[0], np.r_[beta[:2], shape[2:] + 0.5])  # the rest stay at base_shape
     np.testing.assert_array_equal(poses[0], pose)
     # more particles than one batch: each mesh is its own parameters' mesh
-    X = np.repeat(x[None], BATCH + 2, axis=0)
+    X = np.repeat(x[None], 2 * BATCH + 2, axis=0)
     X[:, 0] = np.linspace(-0.5, 0.5, len(X))  # root x
     V = obj.meshes(X)
     ref = model.vertices(shapes[0], pose)
-    for i in (0, BATCH - 1, BATCH, BATCH + 1):
+    for i in (0, BATCH - 1, BATCH, 2 * BATCH, 2 * BATCH + 1):
         np.testing.assert_allclose(V[i], ref + [X[i, 0], 0, 0], atol=1e-9)
 
 
@@ -90,6 +92,9 @@ def test_pose_bounds():
     np.testing.assert_array_equal(hi[3:], model.pose_limits[3:, 1])
     np.testing.assert_array_equal(lo[:3], [model.pose_limits[0, 0], model.pose_limits[1, 0], -0.6])
     np.testing.assert_array_equal(hi[:3], [model.pose_limits[0, 1], model.pose_limits[1, 1], 0.3])
+    lo, hi = pose_bounds(model, root_xy=[0.2, -0.4])  # within 1 m by default
+    np.testing.assert_allclose(lo[:2], [-0.8, -1.4])
+    np.testing.assert_allclose(hi[:2], [1.2, 0.6])
     lo, hi = pose_bounds(model, root_xy=[0.2, -0.4], xy_margin=0.25)
     np.testing.assert_allclose(lo[:3], [-0.05, -0.65, -0.6])
     np.testing.assert_allclose(hi[:3], [0.45, -0.15, 0.3])

@@ -110,3 +110,77 @@ def test_measure_checks_density_and_mesh_shapes(body):
     faces[0, 0] = len(v)
     with pytest.raises(ValueError, match=rf"faces index vertices 0..{len(v)}, the mesh has {len(v)}"):
         measure_mesh(v, vt, J, faces, model.parts, model.face_parts)
+
+
+def test_measure_mesh_passes_every_iso_value_through(body):
+    """Each ISO 7250-1 value is the one :func:`measure_iso` computes on the same meshes (the
+    body's parts included: the hip selection uses them); default density 980 kg/m³."""
+    from studio.body.iso7250 import measure_iso
+
+    model, _, v, vt, J = body
+    iso = measure_iso(v, vt, J, model.faces, model.parts, model.face_parts, density=980.0).values
+    m = _measure(model, v, vt, J)
+    for key, value in iso.items():
+        assert m[key] == value, key
+    assert (m["stature"], m["arm_span"], m["mass"]) == (iso["stature"], iso["arm_span"], iso["mass"])
+    assert m["mass"] == pytest.approx(980.0 * m["volume"], rel=1e-12)
+
+
+def test_shoulder_breadth_is_zero_when_nothing_is_above_the_shoulders(body):
+    model, _, v, vt, J = body
+    J = J.copy()
+    J[P["upperarm_l"], 2] = J[P["upperarm_r"], 2] = 10.0  # shoulders 10 m up: no vertex above
+    assert _measure(model, v, vt, J)["shoulder_breadth"] == 0.0
+
+
+def test_density_boundaries_and_mesh_error_messages(body):
+    model, shape, v, vt, J = body
+    light = _measure(model, v, vt, J, density=0.5)  # any positive density, below 1 too
+    assert light["mass"] == pytest.approx(0.5 * light["volume"], rel=1e-12)
+    with pytest.raises(ValueError, match=r"density must be a positive number of kg/m³, got 0"):
+        measure(model, shape, density=0.0)
+    with pytest.raises(ValueError, match=r"density must be a positive number of kg/m³, got inf"):
+        measure(model, shape, density=np.inf)
+    assert measure(model, shape, density=0.5)["mass"] == pytest.approx(light["mass"], rel=1e-12)
+    with pytest.raises(ValueError, match=r"^vertices must have shape \(N, 3\), got \(3,\)$"):
+        _measure(model, v[0], vt, J)
+    with pytest.raises(ValueError, match=r"^faces must have shape \(N, 3\), got \(4,\)$"):
+        measure_mesh(v, vt, J, model.faces[0].tolist() + [0], model.parts, model.face_parts)
+    with pytest.raises(ValueError, match=rf"^parts must have shape \({len(v)}\), got \(3,\)$"):
+        measure_mesh(v, vt, J, model.faces, model.parts[:3], model.face_parts)
+    with pytest.raises(ValueError, match=rf"^face_parts must have shape \({len(model.faces)}\), got"):
+        measure_mesh(v, vt, J, model.faces, model.parts, model.face_parts[:-1])
+    with pytest.raises(ValueError, match=r"faces index vertices -1\.\."):
+        measure_mesh(v, vt, J, np.r_[[[-1, 0, 1]], model.faces[1:]], model.parts, model.face_parts)
+
+
+def test_t_pose_of_a_non_mean_shape(body):
+    """The T-pose is built from the joints of the body being measured, not the mean body's."""
+    model, shape, _, _, _ = body
+    tall = shape.copy()
+    tall[:3] = 2.0 * np.sqrt(model.eigenvalues[:3])
+    pose = t_pose(model, tall)
+    J = model.joints(tall, pose)
+    for side, sign in (("l", 1.0), ("r", -1.0)):
+        s, e = J[P[f"upperarm_{side}"]], J[P[f"lowerarm_{side}"]]
+        np.testing.assert_allclose((e - s) / np.linalg.norm(e - s), [sign, 0, 0], atol=1e-6)
+
+
+def test_slices_of_a_box_hand_computed():
+    """Box [0,2]×[0,1]×[0,3] with triangulated sides: the plane z = 1 cuts the 4 vertical edges
+    and the 4 side diagonals, at points on the 2 × 1 rectangle; a plane through vertices (z = 0,
+    z = 3) cuts no edge; a triangle's perimeter is its three sides; volumes of a batch."""
+    from studio.body.measure import convex_perimeter, mesh_volume, slice_points
+
+    v = np.array([[x, y, z] for x in (0, 2) for y in (0, 1) for z in (0, 3)], float)
+    f = np.array([[0, 2, 3], [0, 3, 1], [4, 5, 7], [4, 7, 6], [0, 1, 5], [0, 5, 4],
+                  [2, 6, 7], [2, 7, 3], [0, 4, 6], [0, 6, 2], [1, 3, 7], [1, 7, 5]])
+    p = slice_points(v, f, 1.0)
+    pts = {tuple(float(c) for c in np.round(q, 12)) for q in p}
+    expected = {(0, 0), (0, 1), (2, 0), (2, 1),  # (x, y) of the vertical edges
+                (0, 1 / 3), (2, 1 / 3), (2 / 3, 0), (2 / 3, 1)}  # diagonals (from a z = 0 corner), a third up
+    assert pts == {tuple(round(c, 12) for c in e) for e in expected} and len(p) == 8
+    assert len(slice_points(v, f, 0.0)) == 0 and len(slice_points(v, f, 3.0)) == 0
+    assert convex_perimeter(np.array([[0.0, 0.0], [3.0, 0.0], [0.0, 4.0]])) == pytest.approx(12.0)
+    vols = mesh_volume(np.stack([v, 2 * v]), f)
+    np.testing.assert_allclose(vols, [6.0, 48.0])

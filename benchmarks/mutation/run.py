@@ -219,6 +219,9 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--tests-at", metavar="REV",
                         help="use only the module's test files that exist at git REV (a 'before' run with "
                              "the tests of an earlier commit; implies --reset-baseline)")
+    parser.add_argument("--rescore", action="store_true",
+                        help="do not run mutmut: score the module's last run again (build/mutation/<module>) "
+                             "against the current equivalent list; replaces its latest record")
     parser.add_argument("--output", type=Path, default=RESULTS / "mutation.json")
     args = parser.parse_args(argv)
 
@@ -242,17 +245,27 @@ def main(argv: list[str] | None = None) -> int:
             args.reset_baseline = True
         patterns = list(spec.get("mutants", []))
         print(f"== {name}: {', '.join(spec['files'])} with {len(spec['tests'])} test file(s)", flush=True)
-        folder = prepare_scratch(name, spec)
-        seconds = run_mutmut(folder, patterns)
-        summary = summarise(name, collect(folder, spec, patterns), equivalents, seconds)
         record = results["modules"].get(name)
-        if record is None or args.reset_baseline:
-            results["modules"][name] = {"before": summary, "after": None}
+        if args.rescore:
+            folder = SCRATCH / name
+            if record is None or not (folder / "mutants").is_dir():
+                parser.error(f"--rescore: no earlier run of {name} in {folder}")
+            last = record.get("after") or record["before"]
+            summary = summarise(name, collect(folder, spec, patterns), equivalents, last["seconds"])
+            summary["date"], summary["commit"] = last["date"], last["commit"]
+            summary["rescored"] = datetime.now(timezone.utc).isoformat(timespec="seconds")
+            record["after" if record.get("after") else "before"] = summary
         else:
-            record["after"] = summary
+            folder = prepare_scratch(name, spec)
+            seconds = run_mutmut(folder, patterns)
+            summary = summarise(name, collect(folder, spec, patterns), equivalents, seconds)
+            if record is None or args.reset_baseline:
+                results["modules"][name] = {"before": summary, "after": None}
+            else:
+                record["after"] = summary
         score = "—" if summary["score"] is None else f"{100 * summary['score']:.1f} %"
         print(f"   {summary['mutants']} mutants, {summary['killed']} killed, {summary['survived']} survived, "
-              f"{summary['equivalent']} equivalent: score {score} in {seconds:.0f} s", flush=True)
+              f"{summary['equivalent']} equivalent: score {score} in {summary['seconds']:.0f} s", flush=True)
         for key in summary["stale_equivalent_entries"]:
             print(f"   note: equivalent entry {key} no longer matches (killed or changed); update modules.toml")
         atomic_write_json(args.output, results, mkdir=True)

@@ -101,3 +101,43 @@ def test_fisheye_round_trip_and_opencv():
     assert np.isnan(fisheye_theta(np.array([top * 1.01]), kf)[0])
     assert fisheye_theta(np.array([top]), kf)[0] == pytest.approx(fisheye_fold_angle(kf), abs=1e-3)
     np.testing.assert_array_equal(fisheye_theta(np.array([0.5, np.pi, 3.2]), np.zeros(4)), [0.5, np.pi, np.nan])
+
+
+@pytest.mark.parametrize("tau", [(0.02, 0.0), (0.0, -0.03)])
+def test_a_sensor_tilt_about_one_axis_only(tau):
+    """τx alone or τy alone is a tilt too (OpenCV's 14-coefficient model)."""
+    xy = _grid()
+    dist = np.r_[FULL[:12], tau]
+    X = np.c_[xy, np.ones(len(xy))]
+    uv, _ = cv2.projectPoints(X, np.zeros(3), np.zeros(3), np.eye(3), dist)
+    np.testing.assert_allclose(distort_normalized(xy, dist), uv.reshape(-1, 2), rtol=0, atol=1e-12)
+    np.testing.assert_allclose(undistort_normalized(uv.reshape(-1, 2), dist), xy, rtol=0, atol=1e-12)
+
+
+def test_single_points_and_points_on_an_axis_are_inverted_too():
+    """One point is a batch of one (not returned as it came); with radial distortion only, a
+    point on the x axis has no y step at all and still converges in x."""
+    dist = np.array([-0.3, 0.1, 0.0, 0.0, 0.0])
+    xy = np.array([[0.5, 0.0]])
+    xy_d = distort_normalized(xy, dist)
+    assert xy_d[0, 1] == 0.0 and xy_d[0, 0] != 0.5
+    np.testing.assert_allclose(undistort_normalized(xy_d, dist), xy, rtol=0, atol=1e-12)
+    axis = np.array([[0.1, 0.0], [0.3, 0.0], [0.6, 0.0], [0.0, -0.5]])
+    np.testing.assert_allclose(undistort_normalized(distort_normalized(axis, dist), dist), axis, rtol=0, atol=1e-12)
+    k = np.array([-0.011603, 0.053991, -0.075427, 0.036664])
+    one = np.array([[0.7, -0.4]])
+    ref = cv2.fisheye.distortPoints(one[:, None], np.eye(3), k).reshape(-1, 2)
+    np.testing.assert_allclose(distort_fisheye(one, k), ref, rtol=0, atol=1e-12)
+    np.testing.assert_allclose(undistort_fisheye(ref, k), one, rtol=0, atol=1e-12)
+
+
+def test_fisheye_boundaries():
+    """90° off-axis exactly is already beyond a pinhole image plane (NaN, "at or beyond"); a
+    lens folding before the first grid step has fold angle 0; k must hold four numbers."""
+    got = undistort_fisheye(np.array([[np.pi / 2, 0.0], [0.5, 0.0]]), np.zeros(4))
+    assert np.isnan(got[0]).all() and got[1] == pytest.approx([np.tan(0.5), 0.0], abs=1e-15)
+    assert fisheye_fold_angle(np.array([-1e7, 0.0, 0.0, 0.0])) == 0.0
+    for fn in (lambda k: fisheye_fold_angle(k), lambda k: fisheye_theta(np.array([0.1]), k),
+               lambda k: distort_fisheye(np.array([[0.1, 0.2]]), k)):
+        with pytest.raises(ValueError):
+            fn(np.zeros(5))

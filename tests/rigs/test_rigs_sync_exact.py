@@ -8,6 +8,7 @@ median go first (ties: the later camera name); a gap of ``g`` keys is ``g`` inco
 from __future__ import annotations
 
 import numpy as np
+import pytest
 
 from rigs import Frame, SyncGroup
 
@@ -83,3 +84,53 @@ def test_timestamp_key_rounds_to_the_nearest_period():
     sync.push(frame("a", 2, frame_id=102))
     sync.push(frame("b", 2, dt=-(PERIOD // 2 - 1), frame_id=9))
     assert sync.stats.emitted == 2 and sync.stats.incomplete == 1  # key 1 in between: nobody
+
+
+def test_a_camera_past_a_key_finalizes_it_and_the_early_outlier_goes():
+    """Key 0 is final as soon as every camera missing from it has delivered a later key; with the
+    instants far from t = 0 the frame farthest from the median is the early one."""
+    sync = SyncGroup(("a", "b"), TOL)
+    sync.push(frame("a", 0))
+    assert sync.push(frame("a", 1)) == []
+    (mf,) = sync.push(frame("b", 1))  # b skipped key 0: it is incomplete, key 1 complete
+    assert mf.index == 0 and mf.frame_ids == {"a": 1, "b": 1}
+    assert sync.stats.incomplete == 1 and sync.stats.dropped == {"a": 0, "b": 1}
+    sync = SyncGroup(("a", "b", "c"), 2_000_000)
+    sync.push(frame("a", 50, dt=-5_000_000))
+    sync.push(frame("b", 50))
+    assert sync.push(frame("c", 50, dt=1_000_000)) == []
+    assert sync.stats.mismatched == {"a": 1, "b": 0, "c": 0}
+    assert sync.stats.summary() == "emitted 0; incomplete 1; mismatched a:1"  # delivered, so not dropped
+
+
+def test_two_gaps_add_up():
+    sync = SyncGroup(("a", "b"), TOL)
+    for k in (0, 2, 5):  # 1, then 3 and 4, never arrive
+        sync.push(frame("a", k))
+        sync.push(frame("b", k))
+    assert (sync.stats.emitted, sync.stats.incomplete, sync.stats.dropped) == (3, 3, {"a": 3, "b": 3})
+
+
+def test_timestamp_keys_count_from_the_first_frame():
+    sync = SyncGroup(("a", "b"), None, key="timestamp", period_ns=PERIOD)
+    t0 = 7 * PERIOD + 123  # the first frame's clock reading is arbitrary
+    for k in range(3):
+        sync.push(Frame("a", np.zeros((1, 1), np.uint8), t0 + k * PERIOD, 1000 + k))
+        out = sync.push(Frame("b", np.zeros((1, 1), np.uint8), t0 + k * PERIOD + 999, 50 + k))
+        assert [m.frame_ids for m in out] == [{"a": 1000 + k, "b": 50 + k}]
+
+
+def test_smallest_allowed_arguments_and_defaults():
+    sync = SyncGroup(("a", "b"), 0, max_pending=1)  # zero tolerance: identical timestamps only
+    sync.push(frame("a", 0))
+    (mf,) = sync.push(frame("b", 0))
+    assert mf.spread_ns == 0
+    assert SyncGroup(("a",), None, key="timestamp", period_ns=1).period_ns == 1
+    sync = SyncGroup(("a", "b"), TOL)  # 16 keys open by default
+    for k in range(20):
+        sync.push(frame("a", k))
+    assert sync.stats.pending == 16 and sync.stats.incomplete == 4
+    with pytest.raises(ValueError, match=r"^SyncGroup needs at least one camera$"):
+        SyncGroup((), TOL)
+    with pytest.raises(ValueError, match=r"^SyncGroup key='timestamp' needs period_ns > 0 \(the frame period\)$"):
+        SyncGroup(("a",), TOL, key="timestamp", period_ns=0)

@@ -137,6 +137,12 @@ def test_fisheye_boundaries():
     got = undistort_fisheye(np.array([[np.pi / 2, 0.0], [0.5, 0.0]]), np.zeros(4))
     assert np.isnan(got[0]).all() and got[1] == pytest.approx([np.tan(0.5), 0.0], abs=1e-15)
     assert fisheye_fold_angle(np.array([-1e7, 0.0, 0.0, 0.0])) == 0.0
+    # a slope of exactly 0 at a grid angle already counts as folded ("stops being positive"):
+    # k1 = −1/(3θ²) at θ = π/2 (grid point 2048) makes 1 + 3 k1 θ² exactly 0.0 in floating point
+    grid = np.linspace(0.0, np.pi, 4097)
+    k1 = -1.0 / (3.0 * grid[2048] ** 2)
+    assert _fisheye_slope(grid[2048:2049], np.array([k1, 0.0, 0.0, 0.0]))[0] == 0.0
+    assert fisheye_fold_angle(np.array([k1, 0.0, 0.0, 0.0])) == grid[2047]
     for fn in (lambda k: fisheye_fold_angle(k), lambda k: fisheye_theta(np.array([0.1]), k),
                lambda k: distort_fisheye(np.array([[0.1, 0.2]]), k)):
         with pytest.raises(ValueError):

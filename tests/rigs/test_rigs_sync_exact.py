@@ -113,7 +113,7 @@ def test_two_gaps_add_up():
 
 def test_timestamp_keys_count_from_the_first_frame():
     sync = SyncGroup(("a", "b"), None, key="timestamp", period_ns=PERIOD)
-    t0 = 7 * PERIOD + 123  # the first frame's clock reading is arbitrary
+    t0 = 1_000 * PERIOD + PERIOD // 4  # the first frame's clock reading is arbitrary (here a quarter period off)
     for k in range(3):
         sync.push(Frame("a", np.zeros((1, 1), np.uint8), t0 + k * PERIOD, 1000 + k))
         out = sync.push(Frame("b", np.zeros((1, 1), np.uint8), t0 + k * PERIOD + 999, 50 + k))

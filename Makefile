@@ -15,12 +15,14 @@ DRIVERS       := $(VENV)/.drivers
 DRIVER_DEBS   := gir1.2-aravis-0.8 libgirepository1.0-dev libcairo2-dev pkg-config gcc python3-dev
 DRIVER_EXTRAS ?= genicam,aravis
 
-.PHONY: demo test bench setup clean help
+.PHONY: demo test bench mutation setup clean help
 
 help:
 	@echo "make demo   run the main job on the shipped sample sequence (sets everything up first)"
 	@echo "make test   run the test suite (sets everything up first, camera drivers included)"
 	@echo "make bench  run every benchmark in benchmarks/ (results in benchmarks/results/)"
+	@echo "make mutation [MODULE=name]  mutation testing of the core modules, or of one (hours / minutes;"
+	@echo "             not part of make test; modules in benchmarks/mutation/modules.toml)"
 	@echo "make clean  remove the virtualenv and caches"
 
 setup: $(STAMP)
@@ -54,6 +56,17 @@ test: $(STAMP) $(DRIVERS)
 
 bench: $(STAMP)
 	@for b in benchmarks/*.py; do echo "== $$b"; $(PY) $$b || exit 1; done
+
+# mutation testing (issue 21): mutmut from the [mutation] extra, one module at a time, niced;
+# results in benchmarks/results/mutation.json and .md
+MUTATION := $(VENV)/.mutation
+MODULE   ?=
+$(MUTATION): $(STAMP)
+	$(PY) -m pip install -q -e '.[$(EXTRAS),mutation]'
+	@touch $(MUTATION)
+
+mutation: $(MUTATION)
+	nice -n 10 $(PY) benchmarks/mutation/run.py $(if $(MODULE),--module $(MODULE))
 
 clean:
 	rm -rf $(VENV) .pytest_cache build *.egg-info

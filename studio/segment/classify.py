@@ -26,6 +26,7 @@ import cv2
 import numpy as np
 
 from studio.segment.errors import SegmentationError
+from studio.segment.hsv import fold_hue
 
 __all__ = ["BACKGROUND", "PERSON", "SHADOW", "Thresholds", "classify_pixels", "normalized_difference"]
 
@@ -86,8 +87,7 @@ def normalized_difference(hsv: np.ndarray, mean: np.ndarray, inv_std: np.ndarray
     (H, W, 3) float32 normalised absolute differences.
     """
     d = cv2.absdiff(hsv, mean)
-    dh = d[..., 0]
-    np.minimum(dh, np.float32(1.0) - dh, out=dh)
+    fold_hue(d[..., 0], out=d[..., 0])  # hue taken around the circle
     return cv2.multiply(d, inv_std)
 
 

@@ -10,7 +10,7 @@ import numpy as np
 
 from studio.segment.errors import SegmentationError
 
-__all__ = ["rgb_to_hsv", "hue_distance", "circular_mean", "circular_std"]
+__all__ = ["rgb_to_hsv", "hue_distance", "fold_hue", "circular_mean", "circular_std"]
 
 TWO_PI = np.float32(2.0 * np.pi)
 
@@ -50,8 +50,19 @@ def hue_distance(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     >>> round(float(hue_distance(np.float32(0.98), np.float32(0.01))), 6)
     0.03
     """
-    d = np.abs(np.asarray(a, dtype=np.float32) - np.asarray(b, dtype=np.float32))
-    return np.minimum(d, np.float32(1.0) - d)
+    return fold_hue(np.abs(np.asarray(a, dtype=np.float32) - np.asarray(b, dtype=np.float32)))
+
+
+def fold_hue(d: np.ndarray, out: np.ndarray | None = None) -> np.ndarray:
+    """An absolute hue difference ``d = |a − b|`` in [0, 1] folded onto the circle, ``min(d, 1 − d)``.
+
+    The one implementation of the wrap-around (:func:`hue_distance` and the classifier's
+    ``N^H`` use it); ``out`` writes in place (float32 arrays).
+
+    >>> float(fold_hue(np.float32(0.75)))
+    0.25
+    """
+    return np.minimum(d, np.float32(1.0) - d, out=out)
 
 
 def circular_mean(hue: np.ndarray, axis: int = 0, weights: np.ndarray | None = None) -> np.ndarray:

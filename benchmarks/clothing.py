@@ -45,6 +45,7 @@ import numpy as np
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
+sys.path.insert(0, str(ROOT / "benchmarks"))
 
 FIRST_SEED = 2000
 FAMILIES = ("a_pose", "t_pose", "arms_overhead", "hands_on_hips", "arm_forward", "wide_stance", "lunge",
@@ -92,20 +93,10 @@ def _spec(p: dict, condition: str) -> str:
         top, bottom = p["garment"]
         person = (f"  top: {{color: {p['top']}, sleeves: {p['sleeves']}, kind: {top}}}\n"
                   f"  bottom: {{color: {p['bottom']}, length: long, kind: {bottom}}}\n  looseness: 0.035\n")
-    return f"""format: studio.sim-spec
-version: 1
-name: clothing_{p['name']}_{condition}
-body: ../body.npz
-fps: 1
-seed: {p['seed']}
-background_frames: 5
-cameras: {{count: 4, size: [656, 490], radius: 3.6, height: 2.3, focal_px: 560}}
-lights:
-  - {{type: point, position: [1.1, -1.5, 3.6], intensity: 0.85}}
-ambient: 0.45
-person:
-  skin_tone: {p['skin_tone']}
-{person}"""
+    from pose_accuracy import bench_spec
+
+    return bench_spec(f"clothing_{p['name']}_{condition}", "../body.npz", p["seed"],
+                      f"  skin_tone: {p['skin_tone']}\n{person}")
 
 
 def build(args) -> int:

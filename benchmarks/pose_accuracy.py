@@ -78,24 +78,30 @@ def people(n: int, per_person: int, split: str = "held-out") -> list[dict]:
     return out
 
 
-def _spec(p: dict) -> str:
+def bench_spec(name: str, body: str, seed: int, person: str) -> str:
+    """A scene spec of one generated person on the benchmarks' 4-camera rig under one point
+    light (``person``: the YAML lines of the ``person`` block after ``skin_tone``)."""
     return f"""format: studio.sim-spec
 version: 1
-name: bench_{p['name']}
-body: body.npz
+name: {name}
+body: {body}
 fps: 1
-seed: {p['seed']}
+seed: {seed}
 background_frames: 5
 cameras: {{count: 4, size: [656, 490], radius: 3.6, height: 2.3, focal_px: 560}}
 lights:
   - {{type: point, position: [1.1, -1.5, 3.6], intensity: 0.85}}
 ambient: 0.45
 person:
-  skin_tone: {p['skin_tone']}
-  top: {{color: {p['top']}, sleeves: {p['sleeves']}}}
-  bottom: {{color: {p['bottom']}, length: long}}
-  looseness: 0.0
-"""
+{person}"""
+
+
+def _spec(p: dict) -> str:
+    return bench_spec(f"bench_{p['name']}", "body.npz", p["seed"],
+                      f"  skin_tone: {p['skin_tone']}\n"
+                      f"  top: {{color: {p['top']}, sleeves: {p['sleeves']}}}\n"
+                      f"  bottom: {{color: {p['bottom']}, length: long}}\n"
+                      "  looseness: 0.0\n")
 
 
 def build(args) -> int:

@@ -316,7 +316,9 @@ def consistency(batch_model: BodyModel, shape: np.ndarray, poses: np.ndarray, fr
     """How well one shape explains every frame (§6.4.2): each frame scored at the final level by
     the same clothing cost with the batch body and with the frame's own single-frame body; the
     single-frame statures' spread; ``flagged`` with the reasons when the frames look like more
-    than one person."""
+    than one person: the shared shape costs some frame over ``COST_RATIO_FLAG`` × its own, or the
+    single-frame statures spread over ``STATURE_SPREAD_FLAG`` while the shared shape explains
+    some frame worse than its own (ratio > 1)."""
     from studio.body import measure
 
     level = options.levels[-1]
@@ -336,7 +338,10 @@ def consistency(batch_model: BodyModel, shape: np.ndarray, poses: np.ndarray, fr
     if ratios and ratios[worst] > COST_RATIO_FLAG:
         reasons.append(f"frame {frames[worst].frame}: the shared shape costs {ratios[worst]:.2f}x its own "
                        f"single-frame shape (> {COST_RATIO_FLAG})")
-    if spread > STATURE_SPREAD_FLAG:
+    # a spread of single-frame statures is evidence of two people only if the shared shape explains
+    # some frame worse than that frame's own shape; when it explains every frame at least as well,
+    # the spread is the single-frame fits' own error (a poor single fit, not a second person)
+    if spread > STATURE_SPREAD_FLAG and ratios and ratios[worst] > 1.0:
         reasons.append(f"single-frame statures spread {spread * 1000:.0f} mm (> {STATURE_SPREAD_FLAG * 1000:.0f} mm)")
     return {"cost_ratio": {str(f.frame): round(r, 4) for f, r in zip(frames, ratios, strict=True)},
             "single_statures_m": {str(f.frame): round(s, 4) for f, s in zip(frames, statures, strict=True)},

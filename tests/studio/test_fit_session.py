@@ -253,3 +253,5 @@ def test_cli_batch_writes_batch_json_mesh_and_the_report_uses_it(tmp_path, capsy
     assert table["measurements"]["stature"]["mean"] == pytest.approx(1000 * obj["measurements"]["stature"], abs=1.0)
     assert main(["fit", str(tmp_path / "s"), "--batch", "--batch-frames", "1"]) == 1
     assert "--batch-frames must be >= 2" in capsys.readouterr().err
+    assert main(["fit", str(tmp_path / "s"), "--batch", "--shadows"]) == 1
+    assert "--shadows and --batch together" in capsys.readouterr().err

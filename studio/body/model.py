@@ -100,13 +100,12 @@ class BodyModel:
         rigid[:, 6] = self._edges
         self._Q_rigid = rigid
         self._Qc = rigid if self.Q_coef is None else posed.compact_q(self.Q_coef, self._edges)
-        self._w_rest = np.ascontiguousarray(np.moveaxis(self._Qc[:, 6], 0, -1))  # (3, 2, F): Q at the rest pose
         self._D_cache: tuple[bytes, np.ndarray] | None = None
         self._solver = scape.PoissonSolver(self.faces, V)
         self._pelvis_idx = np.nonzero(self.parts == _PELVIS)[0]
         # rest-pose meshes are linear in the shape coefficients: precompute the basis
         Dall = np.concatenate([self._Dm[None], self._Db]).astype(np.float64).reshape(K + 1, 3, 3, F)
-        w0 = self._w_rest.astype(np.float64)
+        w0 = np.moveaxis(self._Qc[:, 6], 0, -1).astype(np.float64)  # (3, 2, F): Q·v at the rest pose
         E = np.einsum("bijf,jkf->bikf", Dall, w0)
         sol = self._solver.solve_planar(E)
         self._rest_mean = sol[0] - sol[0][self._pelvis_idx].mean(axis=0)

@@ -33,7 +33,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from .chamfer import _check_tau, _distance_to, _mask_flag, as_mask, normalise_chamfer
-from .silhouette import DEFAULT_TAU, SilhouetteTarget, _bbox, _summed_area, downsample_mask
+from .silhouette import DEFAULT_TAU, SilhouetteTarget, _bbox, _summed_area, _window_sum, downsample_mask
 
 __all__ = [
     "CLOTHING_PRESETS",
@@ -247,10 +247,6 @@ class ClothingCost:
             "weights": dict(self.weights),
             "views": {n: float(v) for n, v in zip(self.names, self.per_view, strict=True)},
         }
-
-
-def _window_sum(table: np.ndarray, r0: int, r1: int, c0: int, c1: int) -> int:
-    return int(table[r1, c1] - table[r0, c1] - table[r1, c0] + table[r0, c0])
 
 
 def clothing_cost(target: ClothingTarget, model_masks: Sequence[np.ndarray]) -> ClothingCost:

@@ -90,6 +90,11 @@ def _summed_area(mask: np.ndarray) -> np.ndarray:
     return table
 
 
+def _window_sum(table: np.ndarray, r0: int, r1: int, c0: int, c1: int) -> int:
+    """``Σ mask[r0:r1, c0:c1]`` from its :func:`_summed_area` table."""
+    return int(table[r1, c1] - table[r0, c1] - table[r1, c0] + table[r0, c0])
+
+
 @dataclass(frozen=True, eq=False)
 class SilhouetteTarget:
     """Observed silhouettes of one frame, precomputed for fast scoring (eq. 4.4–4.6).
@@ -321,7 +326,7 @@ def _score_view(target: SilhouetteTarget, k: int, model: np.ndarray) -> tuple[fl
     m = int(math.ceil(tau))
     R0, R1, C0, C1 = max(r0 - m, 0), min(r1 + m, h), max(c0 - m, 0), min(c1 + m, w)
     table = target.summed_areas[k]
-    n_inside = int(table[R1, C1] - table[R0, C1] - table[R1, C0] + table[R0, C0])
+    n_inside = _window_sum(table, R0, R1, C0, C1)
     dist = _distance_to(model[R0:R1, C0:C1], tau, _mask_flag(target.mask_size))
     backward = tau * (n_obs - n_inside) + float(
         np.sum(dist, where=target.masks[k][R0:R1, C0:C1], dtype=np.float64)

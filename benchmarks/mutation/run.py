@@ -46,7 +46,7 @@ SURVIVED = {"survived", "no tests", "suspicious"}
 
 def load_plan(path: Path = HERE / "modules.toml") -> tuple[dict[str, dict], list[dict]]:
     """Modules (name → files, tests, optional pytest ``-k`` ``select`` and mutant-name patterns
-    ``mutants``) and the equivalent-mutant list."""
+    ``mutants``) and the equivalent-mutant list (``equivalent/<module>.toml``, one file a module)."""
     data = tomllib.loads(path.read_text("utf-8"))
     modules = data.get("modules", {})
     for name, spec in modules.items():
@@ -56,11 +56,15 @@ def load_plan(path: Path = HERE / "modules.toml") -> tuple[dict[str, dict], list
             for entry in spec[field]:
                 if not list(REPO.glob(entry)):
                     raise ValueError(f"{path}: modules.{name}.{field}: {entry!r} matches no file")
-    equivalents = data.get("equivalent", [])
-    for i, entry in enumerate(equivalents):
-        for field in ("mutant", "line", "reason"):
-            if not entry.get(field):
-                raise ValueError(f"{path}: equivalent[{i}].{field}: expected a non-empty string")
+    equivalents = []
+    for listing in sorted((path.parent / "equivalent").glob("*.toml")):
+        if listing.stem not in modules:
+            raise ValueError(f"{listing}: expected the name of a module of {path.name}")
+        for i, entry in enumerate(tomllib.loads(listing.read_text("utf-8")).get("equivalent", [])):
+            for field in ("mutant", "line", "reason"):
+                if not entry.get(field):
+                    raise ValueError(f"{listing}: equivalent[{i}].{field}: expected a non-empty string")
+            equivalents.append(entry)
     return modules, equivalents
 
 
@@ -267,7 +271,7 @@ def main(argv: list[str] | None = None) -> int:
         print(f"   {summary['mutants']} mutants, {summary['killed']} killed, {summary['survived']} survived, "
               f"{summary['equivalent']} equivalent: score {score} in {summary['seconds']:.0f} s", flush=True)
         for key in summary["stale_equivalent_entries"]:
-            print(f"   note: equivalent entry {key} no longer matches (killed or changed); update modules.toml")
+            print(f"   note: equivalent entry {key} no longer matches (killed or changed); update equivalent/{name}.toml")
         atomic_write_json(args.output, results, mkdir=True)
         atomic_write_text(args.output.with_suffix(".md"), table(results), mkdir=True)
     print(f"results: {args.output} and {args.output.with_suffix('.md')}")

@@ -114,8 +114,10 @@ def _calibration_html(unc: dict, segmentation: dict) -> str:
             f"{_fmt(info.get('surface_sigma_mm'), 2)} mm per point.</p><table>{''.join(rows)}</table>")
 
 
-def _light_html(light: dict | None, camera_centres: dict | None) -> str:
-    """The light section (thesis ch. 5): the light from above and its posterior, when estimated."""
+def _light_html(light: dict | None, camera_centres: dict | None, shadows=()) -> str:
+    """The light section (thesis ch. 5): the light from above and its posterior, when estimated,
+    and ``shadows`` (:class:`~studio.report.shadows.ShadowOverlay`): predicted against observed
+    shadows per frame and camera."""
     if not light:
         return ""
     from studio.light.figures import posterior_figure, top_view_figure
@@ -133,13 +135,34 @@ def _light_html(light: dict | None, camera_centres: dict | None) -> str:
             f"emcee, {s['n_samples']} samples, effective sample size {s['effective_sample_size']:.0f}).</p>"
             f"<ul>{''.join(rows)}</ul><div class='row'>"
             f"<img src=\"{figure_base64(top_view_figure(light, camera_centres))}\" alt=\"light from above\">"
-            f"<img src=\"{figure_base64(posterior_figure(light))}\" alt=\"posterior of the light\"></div>")
+            f"<img src=\"{figure_base64(posterior_figure(light))}\" alt=\"posterior of the light\"></div>"
+            f"{_shadow_overlays_html(shadows)}")
+
+
+def _shadow_overlays_html(shadows) -> str:
+    """Per frame, every camera's shadow overlay with its shadow precision / recall."""
+    from studio.fit import OVERLAY_COLORS
+    from studio.report.views import png_base64
+
+    if not shadows:
+        return ""
+    legend = " ".join(f"<span class='sw' style='background:rgb{tuple(int(v) for v in col)}'></span>{_esc(name)}"
+                      for name, col in OVERLAY_COLORS.items())
+    rows = []
+    for f in sorted({s.frame for s in shadows}):
+        figs = [f'<figure style="margin:2px"><img src="{png_base64(s.image)}" alt="shadow {_esc(s.camera)}">'
+                f'<figcaption>{_esc(s.camera)}: shadow precision {_fmt(s.precision, 3)}, recall {_fmt(s.recall, 3)}'
+                f'</figcaption></figure>' for s in shadows if s.frame == f]
+        rows.append(f"<h3>Shadows of frame {_esc(f)}</h3><div class='row'>{''.join(figs)}</div>")
+    return (f"<p>The shadow the body casts under the estimated light, less the body itself (model), against the "
+            f"shadow the segmentation found (image); precision: share of the predicted shadow observed, recall: "
+            f"share of the observed shadow predicted. Legend: {legend}.</p>{''.join(rows)}")
 
 
 def page_html(data, *, max_overlay_frames: int = 4, light: dict | None = None,
-              camera_centres: dict | None = None) -> str:
+              camera_centres: dict | None = None, shadows=()) -> str:
     """The whole page of a :class:`~studio.report.data.ReportData` (with ``light``, the
-    contents of ``light/light.json``, a light section)."""
+    contents of ``light/light.json``, a light section; ``shadows`` its shadow overlays)."""
     from rigs.imageio import read_image
     from studio.fit import OVERLAY_COLORS
     from studio.fit.quality import summary_line
@@ -192,7 +215,7 @@ participant's sex. A figure resting on flagged frames or implausible against the
 <h2>Quality</h2><p>{_esc(qual or 'no quality gates recorded (fitted before they existed)')}.</p>
 {_quality_html(data.qualities)}
 <img src="{figure_base64(frames_figure(data.fits, data.qualities))}" alt="quality over frames">
-{_light_html(light, camera_centres)}
+{_light_html(light, camera_centres, shadows)}
 <h2>Calibration and segmentation</h2>{_calibration_html(data.uncertainty, data.segmentation)}
 <h2>Overlays</h2><p>Full resolution, one image per camera. Legend: {legend}.</p>
 {''.join(overlay_rows)}
@@ -232,9 +255,9 @@ def write_report(source, *, participant=None, pdf: bool = False, posterior: bool
     data = gather(source, participant, posterior=posterior)
     lay = _layout(source)
     write_measurements(lay, data.table, data.participant.to_json())
-    light, centres = _light_of(lay)
+    light, centres, shadows = _light_of(source, lay)
     p = atomic_write_text(lay.report_html, page_html(data, max_overlay_frames=max_overlay_frames, light=light,
-                                                     camera_centres=centres))
+                                                     camera_centres=centres, shadows=shadows))
     if pdf:
         from studio.report.pdf import write_pdf
 
@@ -243,24 +266,32 @@ def write_report(source, *, participant=None, pdf: bool = False, posterior: bool
     return p
 
 
-def _light_of(lay) -> tuple[dict | None, dict | None]:
-    """``light/light.json`` (None when absent or unreadable: the report goes on without it) and the
-    calibrated camera centres {name: (x, y, z)}."""
+def _light_of(source, lay) -> tuple[dict | None, dict | None, list]:
+    """``light/light.json`` (None when absent or unreadable: the report goes on without it), the
+    calibrated camera centres {name: (x, y, z)} and the shadow overlays of two of its frames
+    (empty when the capture, its segmentation or the bodies cannot be read)."""
     from studio.light import LightError, load_light
+    from studio.report.shadows import shadow_overlays
+    from studio.workspace import Workspace
 
     try:
-        _, light = load_light(lay.light_json)
+        lights, light = load_light(lay.light_json)
     except LightError as exc:
         if lay.light_json.is_file():
             log.warning("report without the light: %s", exc)
-        return None, None
+        return None, None, []
     try:
-        from calibration import RigCalibration
-
-        calib = RigCalibration.load(lay.source / "calibration.json")
-        return light, {c.name: c.center.tolist() for c in calib}
-    except Exception:  # noqa: BLE001 - the cameras are decoration of the top view
-        return light, None
+        ws = source if isinstance(source, Workspace) else Workspace.open(lay.source, out=lay.root)
+        centres = {c.name: c.center.tolist() for c in ws.cameras}
+    except Exception as exc:  # noqa: BLE001 - the cameras and overlays are decoration of the light section
+        log.warning("report's light section without cameras or shadow overlays: %s", exc)
+        return light, None, []
+    try:
+        shadows = shadow_overlays(ws, lights, light)
+    except Exception as exc:  # noqa: BLE001 - e.g. the segmentation was removed since the light was estimated
+        log.warning("report's light section without shadow overlays: %s", exc)
+        shadows = []
+    return light, centres, shadows
 
 
 def _layout(source):

@@ -12,7 +12,7 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-__all__ = ["front_faces", "contour_edges", "winding_fill"]
+__all__ = ["front_faces", "contour_edges", "project_pinhole", "winding_fill"]
 
 
 @njit(cache=True, nogil=True)
@@ -101,3 +101,37 @@ def winding_fill(p, q, w, h):  # pragma: no cover - compiled
             acc += diff[yi, xi]
             out[yi, xi] = acc != 0
     return out
+
+
+@njit(cache=True, nogil=True)
+def project_pinhole(V, idx, R, t, K, d):  # pragma: no cover - compiled
+    """Pixels (n, 2) and depths (n,) of the vertices ``V[idx]`` in a pinhole camera (``R``,
+    ``t``, ``K``) with OpenCV's radial / tangential / thin-prism distortion ``d`` = (k1, k2,
+    p1, p2, k3, k4, k5, k6, s1, s2, s3, s4) (no sensor tilt): the arithmetic of
+    :meth:`calibration.Camera.project_points` (:func:`calibration.distortion.distort_normalized`)
+    for the few hundred contour vertices of a view, without its thirty array calls."""
+    k1, k2, p1, p2, k3, k4, k5, k6 = d[0], d[1], d[2], d[3], d[4], d[5], d[6], d[7]
+    s1, s2, s3, s4 = d[8], d[9], d[10], d[11]
+    n = idx.shape[0]
+    uv = np.empty((n, 2))
+    depth = np.empty(n)
+    for i in range(n):
+        X0, X1, X2 = V[idx[i], 0], V[idx[i], 1], V[idx[i], 2]
+        xc = X0 * R[0, 0] + X1 * R[0, 1] + X2 * R[0, 2] + t[0]
+        yc = X0 * R[1, 0] + X1 * R[1, 1] + X2 * R[1, 2] + t[1]
+        z = X0 * R[2, 0] + X1 * R[2, 1] + X2 * R[2, 2] + t[2]
+        depth[i] = z
+        if z <= 0:
+            uv[i, 0] = np.nan
+            uv[i, 1] = np.nan
+            continue
+        x = xc / z
+        y = yc / z
+        r2 = x * x + y * y
+        radial = (1.0 + r2 * (k1 + r2 * (k2 + r2 * k3))) / (1.0 + r2 * (k4 + r2 * (k5 + r2 * k6)))
+        xy2 = 2.0 * x * y
+        xd = x * radial + p1 * xy2 + p2 * (r2 + 2.0 * x * x) + r2 * (s1 + s2 * r2)
+        yd = y * radial + p1 * (r2 + 2.0 * y * y) + p2 * xy2 + r2 * (s3 + s4 * r2)
+        uv[i, 0] = K[0, 0] * xd + K[0, 1] * yd + K[0, 2]
+        uv[i, 1] = K[1, 1] * yd + K[1, 2]
+    return uv, depth

@@ -114,3 +114,36 @@ def test_empty_and_bad_inputs():
         silhouettes_contour([cam], V[:, :2], F)
     with pytest.raises(ValueError, match="faces"):
         silhouettes_fast([cam], V, F + 100)
+
+
+@pytest.mark.parametrize("dist", [np.zeros(5), [-0.12, 0.05, 0.001, -0.001, 0.02],
+                                  [-0.3, 0.1, 0.002, -0.003, 0.01, 0.05, -0.02, 0.01, 0.001, -0.002, 0.003, 0.0005]])
+def test_compiled_projection_equals_camera_model(dist):
+    """The contour renderer's compiled pinhole projection against Camera.project_points (the
+    model cv2.projectPoints is tested against), every coefficient of the 12-term model in use;
+    points behind the camera get NaN pixels and their depth."""
+    from studio.render.spans import _pinhole_lens
+    from studio.render.winding import project_pinhole
+
+    cam = _rig()[1].replace(dist=np.asarray(dist, float))
+    rng = np.random.default_rng(3)
+    V = rng.uniform(-0.6, 0.6, (400, 3))
+    V[:5] = cam.center + 0.5 * (cam.R.T @ np.array([0.0, 0.0, -1.0]))  # behind the camera
+    idx = np.arange(0, 400, 3)
+    idx = np.concatenate([[0, 2], idx])
+    uv, depth = project_pinhole(V, idx, *_pinhole_lens(cam))
+    ref_uv, ref_depth, front = cam.project_points(V[idx])
+    np.testing.assert_allclose(depth, ref_depth, rtol=0, atol=1e-12)
+    assert np.array_equal(np.isnan(uv[:, 0]), ~front) and np.array_equal(~front, idx < 5)
+    np.testing.assert_allclose(uv[front], ref_uv[front], rtol=0, atol=1e-9)
+
+
+def test_compiled_projection_not_used_for_fisheye_or_tilt():
+    from studio.render.spans import _pinhole_lens
+
+    cam = _rig()[0]
+    assert _pinhole_lens(cam) is not None
+    assert _pinhole_lens(cam.replace(dist=np.r_[np.zeros(12), 0.01, 0.0])) is None
+    fish = Camera(name="f", K=cam.K, dist=np.array([0.01, 0.0, 0.0, 0.0]), R=cam.R, t=cam.t, size=cam.size,
+                  model="fisheye")
+    assert _pinhole_lens(fish) is None

@@ -316,8 +316,7 @@ class BodyModel:
         if Y.shape[-2:] != self.template.shape or not np.all(np.isfinite(Y)):
             raise BodyModelError(f"vertices must be finite (..., {self.n_vertices}, 3) in template correspondence")
         lead = Y.shape[:-2]
-        inv = np.linalg.inv(scape.triangle_frames(self.template, self.faces))
-        D = (scape.triangle_frames(Y.reshape((-1,) + self.template.shape), self.faces) @ inv).reshape(-1, self.D_mean.size)
+        D = scape.deformation_gradients(self.template, Y, self.faces).reshape(-1, self.D_mean.size)
         w = np.ones(len(self.faces)) if self.D_weights is None else np.asarray(self.D_weights, dtype=np.float64)
         w9 = np.repeat(w, 9)
         U = self.D_basis.astype(np.float64)

@@ -294,16 +294,9 @@ class BodyModel:
         p = np.asarray(poses, dtype=np.float64)
         rest = self.rest_vertices_batch(s)  # pelvis centroid at 0
         J0 = np.einsum("jv,bvc->bjc", self.joint_regressor, rest)
-        G = self.part_rotations(p)
-        J = np.empty_like(J0)
         root = p[:, :3].copy()
         root[:, 2] += self._anchor(s)
-        for k, parent in enumerate(PART_PARENTS):
-            if parent < 0:
-                J[:, k] = root + np.einsum("bij,bj->bi", G[:, k], J0[:, k])
-            else:
-                J[:, k] = J[:, parent] + np.einsum("bij,bj->bi", G[:, parent], J0[:, k] - J0[:, parent])
-        return J
+        return scape.forward_kinematics(J0, self.part_rotations(p), root, PART_PARENTS)
 
     def shape_from_vertices(self, vertices) -> np.ndarray:
         """Shape coefficients (…, n_shape) best explaining rest-pose meshes (…, V, 3).
@@ -316,8 +309,7 @@ class BodyModel:
         if Y.shape[-2:] != self.template.shape or not np.all(np.isfinite(Y)):
             raise BodyModelError(f"vertices must be finite (..., {self.n_vertices}, 3) in template correspondence")
         lead = Y.shape[:-2]
-        inv = np.linalg.inv(scape.triangle_frames(self.template, self.faces))
-        D = (scape.triangle_frames(Y.reshape((-1,) + self.template.shape), self.faces) @ inv).reshape(-1, self.D_mean.size)
+        D = scape.deformation_gradients(self.template, Y, self.faces).reshape(-1, self.D_mean.size)
         w = np.ones(len(self.faces)) if self.D_weights is None else np.asarray(self.D_weights, dtype=np.float64)
         w9 = np.repeat(w, 9)
         U = self.D_basis.astype(np.float64)

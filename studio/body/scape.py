@@ -29,6 +29,7 @@ __all__ = [
     "edge_operator",
     "PoissonSolver",
     "fit_pose_deformation",
+    "forward_kinematics",
     "pose_deformation",
 ]
 
@@ -198,3 +199,21 @@ def pose_deformation(coef: np.ndarray, rotvecs: np.ndarray, joint_pairs: np.ndar
     X = pose_features(rotvecs, joint_pairs)  # (..., F, 7)
     q = np.einsum("...fk,fkn->...fn", X, coef)
     return q.reshape(q.shape[:-1] + (3, 3))
+
+
+def forward_kinematics(rest_joints: np.ndarray, G: np.ndarray, root: np.ndarray, parents) -> np.ndarray:
+    """Posed joint centres (B, J, 3) down the kinematic tree ``parents`` (-1: the root).
+
+    ``rest_joints`` (B, J, 3) or (J, 3) rest-pose centres, ``G`` (B, J, 3, 3) global part
+    rotations, ``root`` (B, 3): the root joint goes to ``root + G_root · J0_root``, every other
+    joint to its parent's position plus ``G_parent · (J0_k − J0_parent)`` (the parent's part
+    carries the bone).
+    """
+    J0 = np.broadcast_to(rest_joints, G.shape[:-2] + (3,))
+    J = np.empty(J0.shape)
+    for k, parent in enumerate(parents):
+        if parent < 0:
+            J[:, k] = root + np.einsum("bij,bj->bi", G[:, k], J0[:, k])
+        else:
+            J[:, k] = J[:, parent] + np.einsum("bij,bj->bi", G[:, parent], J0[:, k] - J0[:, parent])
+    return J

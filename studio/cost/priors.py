@@ -112,6 +112,16 @@ def _threshold(value) -> float:
     return value
 
 
+def _limits(lower, upper, d: int) -> tuple[np.ndarray, np.ndarray]:
+    """Joint limits ``(D,)`` each (``±inf`` allowed, ``lower <= upper``: equal limits fix a parameter)."""
+    lower = _vector(lower, "lower", d, allow_inf=True)
+    upper = _vector(upper, "upper", d, allow_inf=True)
+    if (lower > upper).any():
+        j = int(np.flatnonzero(lower > upper)[0])
+        raise ValueError(f"lower/upper: limit {j} has lower {lower[j]} > upper {upper[j]}")
+    return lower, upper
+
+
 def pose_limit_penalty(theta, lower, upper, sigma):
     """First term of eq. 6.9: ``Σ_j (max(0, θ_j^min − θ_j, θ_j − θ_j^max) / σ_j)²``.
 
@@ -120,11 +130,7 @@ def pose_limit_penalty(theta, lower, upper, sigma):
     """
     theta = _params(theta, "theta")
     d = theta.shape[-1]
-    lower = _vector(lower, "lower", d, allow_inf=True)
-    upper = _vector(upper, "upper", d, allow_inf=True)
-    if (lower > upper).any():
-        j = int(np.flatnonzero(lower > upper)[0])
-        raise ValueError(f"lower/upper: limit {j} has lower {lower[j]} > upper {upper[j]}")
+    lower, upper = _limits(lower, upper, d)
     sigma = _positive(sigma, "sigma", d)
     excess = np.maximum(0.0, np.maximum(lower - theta, theta - upper))
     return _out(np.sum((excess / sigma) ** 2, axis=-1))
@@ -152,11 +158,7 @@ def gaussian_penalty(x, mean, cov, threshold: float = 0.0):
     d = x.shape[-1]
     mean = _vector(mean, "mean", d)
     chol = _cholesky(cov, d)
-    threshold = _threshold(threshold)
-    diff = (x - mean).reshape(-1, d).T
-    white = _solve_lower(chol, diff)
-    r = np.sqrt(np.sum(white**2, axis=0)).reshape(x.shape[:-1])
-    return _out(np.maximum(0.0, r - threshold) ** 2)
+    return _hinged_whitened(x - mean, chol, _threshold(threshold))
 
 
 def _cholesky(cov, d: int) -> np.ndarray:
@@ -171,10 +173,14 @@ def _cholesky(cov, d: int) -> np.ndarray:
         raise ValueError("cov: the covariance is not positive definite") from None
 
 
-def _solve_lower(chol: np.ndarray, rhs: np.ndarray) -> np.ndarray:
+def _hinged_whitened(diff: np.ndarray, chol: np.ndarray, threshold: float):
+    """``max(0, r − threshold)²`` with ``r² = dᵀ (L Lᵀ)⁻¹ d`` for differences ``d`` ``(..., D)``."""
     from scipy.linalg import solve_triangular
 
-    return solve_triangular(chol, rhs, lower=True)
+    d = chol.shape[0]
+    white = solve_triangular(chol, diff.reshape(-1, d).T, lower=True)
+    r = np.sqrt(np.sum(white**2, axis=0)).reshape(diff.shape[:-1])
+    return _out(np.maximum(0.0, r - threshold) ** 2)
 
 
 @dataclass(frozen=True)
@@ -230,11 +236,7 @@ class PosePrior:
     def __post_init__(self):
         sigma = _positive(self.sigma, "sigma", None)
         d = sigma.shape[0]
-        lower = _vector(self.lower, "lower", d, allow_inf=True)
-        upper = _vector(self.upper, "upper", d, allow_inf=True)
-        if (lower > upper).any():
-            j = int(np.flatnonzero(lower > upper)[0])
-            raise ValueError(f"lower/upper: limit {j} has lower {lower[j]} > upper {upper[j]}")
+        lower, upper = _limits(self.lower, self.upper, d)
         mean = None if self.mean is None else _vector(self.mean, "mean", d)
         chol = None
         if self.cov is not None:
@@ -265,9 +267,7 @@ class PosePrior:
         elif self._chol is None:
             deviation = self.weight * pose_deviation_penalty(theta, self.mean, self.sigma, self.threshold)
         else:
-            diff = (theta - self.mean).reshape(-1, self.size).T
-            r = np.sqrt(np.sum(_solve_lower(self._chol, diff) ** 2, axis=0)).reshape(theta.shape[:-1])
-            deviation = self.weight * _out(np.maximum(0.0, r - self.threshold) ** 2)
+            deviation = self.weight * _hinged_whitened(theta - self.mean, self._chol, self.threshold)
         return PriorTerms(limits=limits, deviation=deviation)
 
     def __call__(self, theta):

@@ -174,18 +174,11 @@ class CylinderObjective(FrameObjective):
     def _posed_joints(self, poses: np.ndarray):
         """Posed joints (B, 15, 3) and part rotations (B, 15, 3, 3) (the chain of
         ``BodyModel.joints_batch`` with the rest joints precomputed)."""
+        from studio.body.scape import forward_kinematics
         from studio.body.skeleton import PART_PARENTS
 
         G = self.model.part_rotations(poses)
-        J0 = self._rest_joints
-        J = np.empty((len(poses), len(J0), 3))
-        root = poses[:, :3] + self._root_offset
-        for k, parent in enumerate(PART_PARENTS):
-            if parent < 0:
-                J[:, k] = root + G[:, k] @ J0[k]
-            else:
-                J[:, k] = J[:, parent] + G[:, parent] @ (J0[k] - J0[parent])
-        return J, G
+        return forward_kinematics(self._rest_joints, G, poses[:, :3] + self._root_offset, PART_PARENTS), G
 
     @property
     def faces(self) -> np.ndarray:

@@ -184,13 +184,20 @@ def _solve_beta(delta: np.ndarray, log_q: np.ndarray, target: float, definition:
     if excess(0.0) <= 0.0:
         return 0.0, weights(0.0)
     spread = float(np.std(delta[finite]))
-    hi = 1.0 / spread if spread > 0 else 1.0
+    if spread == 0.0:  # all finite costs equal: any β gives the same weights
+        return 0.0, weights(0.0)
+    hi = 1.0 / spread
     for _ in range(200):
-        if excess(hi) < 0.0:
+        if excess(hi) <= 0.0:
             break
         hi *= 2.0
-    else:  # all finite costs equal: any β gives the same weights
-        return 0.0, weights(0.0)
+    else:
+        # Survival stays above the target however large β: more than the target's share of the
+        # particles tie at the lowest cost. The weights of the largest β tried (uniform over the
+        # tied best) come closest; β = 0 would weigh the worst particles like the best.
+        return hi, weights(hi)
+    # β in [0, hi]; hi itself when the excess is exactly 0 there (the best tie at exactly the
+    # target's share, e.g. half of the particles for 0.5: the target is met only in the limit).
     beta = brentq(excess, 0.0, hi, xtol=1e-12, rtol=1e-6, maxiter=200)
     return float(beta), weights(beta)
 

@@ -40,8 +40,7 @@ import numpy as np
 from scipy.optimize import least_squares
 from scipy.sparse import coo_matrix
 
-from calibration.camera import Camera
-from calibration.distortion import distort_fisheye, distort_normalized
+from calibration.camera import Camera, lens_distort, normalized_to_pixels
 from calibration.rotation import matrix_to_rotvec, rotvec_to_matrix
 from calibration.detect import Detection
 from calibration.errors import CalibrationError
@@ -97,7 +96,8 @@ class BundleParameterization:
             raise CalibrationError(f"bundle adjustment: reference camera {reference!r} not in {list(cameras)}")
         self.templates = dict(cameras)
         self.camera_names = list(cameras)
-        self.fisheye = [c.model == "fisheye" for c in cameras.values()]
+        self.models = [c.model for c in cameras.values()]
+        self.fisheye = [m == "fisheye" for m in self.models]
         self.view_names = list(view_names)
         self.reference = reference
         self.ref_index = self.camera_names.index(reference)
@@ -141,8 +141,9 @@ class BundleParameterization:
                 x[sl] = np.concatenate([matrix_to_rotvec(R), t])
             isl = self.intr_slice(i)
             if isl is not None:
+                head = cam.dist[:5]  # longer vectors are cut to k1 k2 p1 p2 k3; fisheye k1..k4 + 0
                 d = np.zeros(5)
-                d[: min(5, cam.dist.size)] = cam.dist[:5]
+                d[: head.size] = head
                 x[isl] = [cam.K[0, 0], cam.K[1, 1], cam.K[0, 2], cam.K[1, 2], *d]
         for j, v in enumerate(self.view_names):
             Rb, tb = board_poses[v]
@@ -152,7 +153,8 @@ class BundleParameterization:
         return x
 
     def arrays(self, x: np.ndarray):
-        """Camera rotations (C, 3, 3), translations (C, 3), intrinsics (C, 4) + dists list, view R (V,3,3), t (V,3)."""
+        """Camera rotations (C, 3, 3), translations (C, 3), intrinsic matrices (C, 3, 3) (the skew
+        stays the template's), distortion vectors (list of C), view rotations (V, 3, 3), translations (V, 3)."""
         C = len(self.camera_names)
         cam_r = np.zeros((C, 3))
         cam_t = np.zeros((C, 3))
@@ -161,29 +163,23 @@ class BundleParameterization:
             cam_r[self.posed] = p[:, :3]
             cam_t[self.posed] = p[:, 3:]
         Rc = rotvec_to_matrix(cam_r)
+        Ks = np.array([c.K for c in self.templates.values()])
         if self.free_intrinsics:
             intr = x[self.n_cam_pose : self.n_cam_pose + self.n_intr].reshape(C, N_INTR)
-            kk = intr[:, :4]
+            Ks[:, 0, 0], Ks[:, 1, 1], Ks[:, 0, 2], Ks[:, 1, 2] = intr[:, :4].T
             dists = [intr[i, 4:8] if self.fisheye[i] else intr[i, 4:] for i in range(C)]
         else:
-            kk = np.array([[c.K[0, 0], c.K[1, 1], c.K[0, 2], c.K[1, 2]] for c in self.templates.values()])
             dists = [c.dist for c in self.templates.values()]
         v = x[self.n_cam_pose + self.n_intr :].reshape(-1, 6)
         Rv = rotvec_to_matrix(v[:, :3])
-        return Rc, cam_t, kk, dists, Rv, v[:, 3:]
+        return Rc, cam_t, Ks, dists, Rv, v[:, 3:]
 
     def unpack(self, x: np.ndarray) -> tuple[dict[str, Camera], dict[str, tuple[np.ndarray, np.ndarray]]]:
         """Cameras (in the reference camera's frame) and board poses (rig from board)."""
-        Rc, tc, kk, dists, Rv, tv = self.arrays(x)
+        Rc, tc, Ks, dists, Rv, tv = self.arrays(x)
         cams = {}
         for i, name in enumerate(self.camera_names):
-            tpl = self.templates[name]
-            K = tpl.K.copy()
-            dist = tpl.dist
-            if self.free_intrinsics:
-                K[0, 0], K[1, 1], K[0, 2], K[1, 2] = kk[i]
-                dist = np.asarray(dists[i]).copy()
-            cams[name] = tpl.replace(K=K, dist=dist, R=Rc[i], t=tc[i])
+            cams[name] = self.templates[name].replace(K=Ks[i], dist=dists[i], R=Rc[i], t=tc[i])
         poses = {v: (Rv[j], tv[j]) for j, v in enumerate(self.view_names)}
         return cams, poses
 
@@ -214,20 +210,17 @@ class BundleParameterization:
 
 def pose_residuals(x: np.ndarray, param: BundleParameterization, obs: Observations) -> np.ndarray:
     """Pixel residuals (2M,) ``projected - observed`` for the parameter vector ``x``."""
-    Rc, tc, kk, dists, Rv, tv = param.arrays(x)
+    Rc, tc, Ks, dists, Rv, tv = param.arrays(x)
     Xr = np.einsum("mij,mj->mi", Rv[obs.view], obs.obj) + tv[obs.view]
     Xc = np.einsum("mij,mj->mi", Rc[obs.cam], Xr) + tc[obs.cam]
     z = Xc[:, 2]
     z = np.where(np.abs(z) < 1e-9, 1e-9, z)
     xy = Xc[:, :2] / z[:, None]
-    for i, d in enumerate(dists):
+    uv = np.empty_like(xy)
+    for i, d in enumerate(dists):  # the cameras' own projection (calibration.camera)
         sel = obs.cam == i
-        if sel.any() and param.fisheye[i]:
-            xy[sel] = distort_fisheye(xy[sel], d)
-        elif sel.any() and np.any(d):
-            xy[sel] = distort_normalized(xy[sel], d)
-    k = kk[obs.cam]
-    uv = np.stack([k[:, 0] * xy[:, 0] + k[:, 2], k[:, 1] * xy[:, 1] + k[:, 3]], axis=1)
+        if sel.any():
+            uv[sel] = normalized_to_pixels(lens_distort(xy[sel], d, param.models[i]), Ks[i])
     return (uv - obs.img).ravel()
 
 

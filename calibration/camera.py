@@ -43,6 +43,8 @@ __all__ = [
     "undistort_fisheye",
     "fisheye_theta",
     "fisheye_fold_angle",
+    "lens_distort",
+    "normalized_to_pixels",
     "MODELS",
 ]
 
@@ -58,16 +60,16 @@ ORTHONORMAL_TOL = 1e-6
 
 # --------------------------------------------------------------------------- validation
 def _as_array(value: Any, camera: str, name: str, shape: tuple[int, ...]) -> np.ndarray:
-    if np.asarray(value).dtype.kind not in "iuf":
-        raise CalibrationError(f"expected numbers, got {np.asarray(value).dtype} values {value!r}",
-                               camera=camera, field=name)
     try:
-        arr = np.array(value, dtype=np.float64)
-    except (TypeError, ValueError) as exc:
-        raise CalibrationError(f"not numeric ({exc})", camera=camera, field=name) from None
+        raw = np.asarray(value)
+    except (TypeError, ValueError) as exc:  # ragged nesting, e.g. [[1, 2], [3]]
+        raise CalibrationError(f"not an array of numbers ({exc})", camera=camera, field=name) from None
+    if raw.dtype.kind not in "iuf":
+        raise CalibrationError(f"expected numbers, got {raw.dtype} values {value!r}", camera=camera, field=name)
+    arr = np.array(raw, dtype=np.float64)  # a copy: the caller's array is never made read-only
     if arr.shape != shape:
-        if arr.size == int(np.prod(shape)) and name in ("t", "dist"):
-            arr = arr.reshape(shape)  # (3,1) column vectors and (1,n) rows are common
+        if arr.size == int(np.prod(shape)) and name in ("t", "rvec"):
+            arr = arr.reshape(shape)  # (3,1) column vectors are common (cv2's tvec, rvec)
         else:
             raise CalibrationError(
                 f"expected shape {shape}, got {arr.shape}", camera=camera, field=name
@@ -86,6 +88,23 @@ def _check_points(X: Any, dim: int, what: str) -> tuple[np.ndarray, bool]:
     if arr.ndim != 2 or arr.shape[1] != dim:
         raise ValueError(f"{what}: expected shape (N, {dim}) or ({dim},), got {np.shape(X)}")
     return arr, single
+
+
+# --------------------------------------------------------------------------- pure projection math
+def lens_distort(xy: np.ndarray, dist: np.ndarray, model: str = "pinhole") -> np.ndarray:
+    """Ideal normalized coordinates (N, 2) → distorted ones through the lens ``model``
+    (:func:`distort_fisheye` for ``"fisheye"``, else :func:`distort_normalized`)."""
+    if model == "fisheye":
+        return distort_fisheye(xy, dist)
+    return distort_normalized(xy, dist)
+
+
+def normalized_to_pixels(xy: np.ndarray, K: np.ndarray) -> np.ndarray:
+    """Normalized coordinates (N, 2) → pixels (N, 2): ``u = fx x + s y + cx``, ``v = fy y + cy``
+    for ``K = [[fx, s, cx], [0, fy, cy], [0, 0, 1]]``."""
+    u = K[0, 0] * xy[:, 0] + K[0, 1] * xy[:, 1] + K[0, 2]
+    v = K[1, 1] * xy[:, 1] + K[1, 2]
+    return np.stack([u, v], axis=1)
 
 
 # --------------------------------------------------------------------------- Camera
@@ -222,9 +241,7 @@ class Camera:
         return self.model == "fisheye" or bool(np.any(self.dist != 0))
 
     def _distort(self, xy: np.ndarray) -> np.ndarray:
-        if self.model == "fisheye":
-            return distort_fisheye(xy, self.dist)
-        return distort_normalized(xy, self.dist)
+        return lens_distort(xy, self.dist, self.model)
 
     def _undistort(self, xy_d: np.ndarray) -> np.ndarray:
         if self.model == "fisheye":
@@ -238,10 +255,7 @@ class Camera:
         return X @ self.R.T + self.t
 
     def _normalized_to_pixels(self, xy: np.ndarray) -> np.ndarray:
-        K = self.K
-        u = K[0, 0] * xy[:, 0] + K[0, 1] * xy[:, 1] + K[0, 2]
-        v = K[1, 1] * xy[:, 1] + K[1, 2]
-        return np.stack([u, v], axis=1)
+        return normalized_to_pixels(xy, self.K)
 
     def _pixels_to_normalized(self, uv: np.ndarray) -> np.ndarray:
         K = self.K
@@ -278,29 +292,30 @@ class Camera:
 
         A radial-tangential polynomial is only meaningful near the image: far outside it
         may fold back into the frame. Points whose ideal (pinhole) pixel lies more than
-        ``margin`` × the larger image side outside the frame, points behind the camera,
-        and fisheye points past the model's fold-back angle come back as NaN. Use this
+        ``margin`` × the larger image side outside the frame ``[0, width] × [0, height]``
+        (exactly that far is kept), points behind the camera, and fisheye points past the
+        model's fold-back angle (:func:`fisheye_fold_angle`; at it is kept) come back as NaN.
+        A camera without distortion gives its pinhole pixels everywhere in front. Use this
         (not :meth:`project`) when building dense maps over large areas (floor views,
         view-to-view warps).
         """
         uv_ideal, _, in_front = self.project_points(X, distort=False)
         if self.is_fisheye:
             uv = self.project_points(X, distort=True)[0]
-            Xc = self.to_camera(np.asarray(X, dtype=np.float64).reshape(-1, 3))
+            Xc = self.to_camera(X)
             theta = np.arctan2(np.hypot(Xc[:, 0], Xc[:, 1]), Xc[:, 2])
             uv[~in_front | (theta > fisheye_fold_angle(self.dist))] = np.nan
             return uv
         if not self.has_distortion:
             return uv_ideal
         m = margin * max(self.width, self.height)
-        with np.errstate(invalid="ignore"):
-            near = (
-                in_front
-                & (uv_ideal[:, 0] > -m)
-                & (uv_ideal[:, 0] < self.width + m)
-                & (uv_ideal[:, 1] > -m)
-                & (uv_ideal[:, 1] < self.height + m)
-            )
+        near = (  # NaN (behind the camera) compares False
+            in_front
+            & (uv_ideal[:, 0] >= -m)
+            & (uv_ideal[:, 0] <= self.width + m)
+            & (uv_ideal[:, 1] >= -m)
+            & (uv_ideal[:, 1] <= self.height + m)
+        )
         uv = np.full_like(uv_ideal, np.nan)
         if near.any():
             uv[near] = self.distort_pixels(uv_ideal[near])
@@ -355,13 +370,12 @@ class Camera:
     def in_image(self, uv: np.ndarray) -> np.ndarray:
         """(N,) bool: pixel inside ``[-0.5, w-0.5) × [-0.5, h-0.5)`` (NaN → False)."""
         uv, _ = _check_points(uv, 2, "uv")
-        with np.errstate(invalid="ignore"):
-            return (
-                (uv[:, 0] >= -0.5)
-                & (uv[:, 0] < self.width - 0.5)
-                & (uv[:, 1] >= -0.5)
-                & (uv[:, 1] < self.height - 0.5)
-            )
+        return (  # NaN compares False
+            (uv[:, 0] >= -0.5)
+            & (uv[:, 0] < self.width - 0.5)
+            & (uv[:, 1] >= -0.5)
+            & (uv[:, 1] < self.height - 0.5)
+        )
 
     # ------------------------------------------------------------------ images
     def undistort_maps(self) -> tuple[np.ndarray, np.ndarray]:
@@ -459,7 +473,7 @@ class Camera:
     @classmethod
     def from_rvec(cls, name: str, K, dist, rvec, t, size, model: str = "pinhole") -> Camera:
         """Build from an axis-angle rotation vector (OpenCV ``rvec``)."""
-        rv = _as_array(np.asarray(rvec, dtype=np.float64).reshape(-1), name, "rvec", (3,))
+        rv = _as_array(rvec, name, "rvec", (3,))
         return cls(name, K, dist, rotvec_to_matrix(rv), t, size, model)
 
     @classmethod
@@ -481,7 +495,7 @@ class Camera:
         if np.ndim(K) == 0:
             f = float(K)
             K = np.array([[f, 0.0, (w - 1) / 2.0], [0.0, f, (h - 1) / 2.0], [0.0, 0.0, 1.0]])
-        return cls(name, K, np.asarray(dist, dtype=np.float64), R, t, (w, h), model)
+        return cls(name, K, dist, R, t, (w, h), model)
 
     @property
     def rvec(self) -> np.ndarray:

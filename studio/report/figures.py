@@ -59,13 +59,17 @@ def frames_figure(fits: dict, qualities: dict):
     a1.set_ylabel("silhouette disagreement\n(mean contour distance, pixels)")
     a1.grid(alpha=0.3)
     qf = [f for f in sorted(qualities) if isinstance(qualities[f].get("silhouette_precision"), (int, float))]
+    low = 0.7  # the y range reaches down to the lowest precision or recall shown
     if qf:
-        a2.plot(qf, [qualities[f]["silhouette_precision"] for f in qf], "o-", label="precision")
-        a2.plot(qf, [qualities[f]["silhouette_recall"] for f in qf], "s-", label="recall")
+        precision = [qualities[f]["silhouette_precision"] for f in qf]
+        recall = [qualities[f]["silhouette_recall"] for f in qf]
+        a2.plot(qf, precision, "o-", label="precision")
+        a2.plot(qf, recall, "s-", label="recall")
         a2.legend(fontsize=8)
+        low = min(low, *precision, *recall)
     a2.set_xlabel("frame")
     a2.set_ylabel("share of silhouette pixels")
-    a2.set_ylim(min(0.7, *(qualities[f]["silhouette_precision"] for f in qf)) if qf else 0.7, 1.0)
+    a2.set_ylim(low, 1.0)
     a2.grid(alpha=0.3)
     from matplotlib.ticker import MaxNLocator
 

@@ -30,13 +30,14 @@ _STABLE = ("stature", "arm_span", "waist_circumference", "hip_circumference", "m
 
 
 def _same_definition_truth(truth: dict | None) -> dict:
-    same = (truth or {}).get("studio") or {}
-    if not isinstance(same, dict):
-        raise ValueError(f"truth measurements: 'studio' must be a mapping name → value, got {type(same).__name__}")
-    if same and not all(n in same for n in ISO_NAMES):  # written before the ISO definitions
-        same = {n: same[n] for n in _STABLE if n in same}
-        if "inseam" in (truth or {}).get("studio", {}):
-            same["crotch_height"] = truth["studio"]["inseam"]
+    studio = (truth or {}).get("studio") or {}
+    if not isinstance(studio, dict):
+        raise ValueError(f"truth measurements: 'studio' must be a mapping name → value, got {type(studio).__name__}")
+    if not studio or all(n in studio for n in ISO_NAMES):
+        return studio
+    same = {n: studio[n] for n in _STABLE if n in studio}  # written before the ISO definitions
+    if "inseam" in studio:
+        same["crotch_height"] = studio["inseam"]
     return same
 
 

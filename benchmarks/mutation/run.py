@@ -272,6 +272,10 @@ def main(argv: list[str] | None = None) -> int:
               f"{summary['equivalent']} equivalent: score {score} in {summary['seconds']:.0f} s", flush=True)
         for key in summary["stale_equivalent_entries"]:
             print(f"   note: equivalent entry {key} no longer matches (killed or changed); update equivalent/{name}.toml")
+        # another module's run may have written the file meanwhile: keep its records, replace ours
+        if args.output.exists():
+            on_disk = json.loads(args.output.read_text("utf-8")).get("modules", {})
+            results["modules"] = {**on_disk, name: results["modules"][name]}
         atomic_write_json(args.output, results, mkdir=True)
         atomic_write_text(args.output.with_suffix(".md"), table(results), mkdir=True)
     print(f"results: {args.output} and {args.output.with_suffix('.md')}")

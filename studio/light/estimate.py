@@ -3,8 +3,8 @@
 1. Refuse scenes whose shadows cannot fix a light: fewer than ``MIN_SHADOW_FRAMES`` frames with
    at least ``MIN_SHADOW_PIXELS`` observed shadow pixels in some view (:class:`LightError`).
 2. Search each candidate kind — ``point``, ``directional``, or both for ``auto`` — on the coarse
-   grid (288 hypotheses, every other frame) then 7×7×7 refinements on every frame
-   (:func:`studio.light.search.search_lights`, eq. 5.9).
+   grid (288 hypotheses, every other frame, images at ``level`` + 1 if large enough) then 7×7×7 refinements down
+   to 5 mm, the last on every frame (:func:`studio.light.search.search_lights`, eq. 5.9).
 3. ``auto`` keeps the kind with the lower Bayesian information criterion
    ``n ln(E/n) + k ln n`` (n the frame × view terms, k the parameters): a point light far away
    casts the shadows of a directional one, and then the simpler model wins.
@@ -28,7 +28,7 @@ from studio.light.pool import evaluators
 from studio.light.posterior import sample_posterior, summarise
 from studio.light.search import search_lights
 
-__all__ = ["LightError", "LightEstimate", "MAX_UNEXPLAINED", "MIN_SHADOW_FRAMES", "MIN_SHADOW_PIXELS",
+__all__ = ["GRID_MIN_PIXELS", "LightError", "LightEstimate", "MAX_UNEXPLAINED", "MIN_SHADOW_FRAMES", "MIN_SHADOW_PIXELS",
            "estimate_light"]
 
 log = logging.getLogger(__name__)
@@ -43,6 +43,17 @@ MAX_UNEXPLAINED = 0.5
 MAX_STORED_SAMPLES = 400
 #: Give up after the coarse grid when its best costs more than this fraction of no shadow.
 HOPELESS = 0.8
+
+
+#: The coarse grid scores images half the working level's size while their smaller side keeps this many pixels.
+GRID_MIN_PIXELS = 60
+
+
+def coarse_level(cameras, level: int) -> int:
+    """The pyramid level of the coarse grid and its first rounds: ``level`` + 1 when the smallest
+    view is still ``GRID_MIN_PIXELS`` across there, else ``level``."""
+    smallest = min(min(c.size) for c in cameras)
+    return level + 1 if level < 8 and smallest / 2 ** (level + 1) >= GRID_MIN_PIXELS else level
 
 
 class LightError(ValueError):
@@ -141,10 +152,11 @@ def estimate_light(bodies, cameras, shadow_masks, *, frames: list[int] | None = 
     ``bodies`` (per frame (vertices (V, 3), faces (F, 3))), seen by ``cameras``.
 
     ``kind`` ``point``, ``directional`` or ``auto``; ``n_lights`` 1 or 2; ``ground`` the plane
-    (None: floor z = 0); ``level`` the pyramid level the silhouettes are compared at; ``workers``
+    (None: floor z = 0); ``level`` the pyramid level the silhouettes are compared at (the coarse
+    grid and its first rounds at :func:`coarse_level`); ``workers``
     processes score the hypotheses; ``stop_m`` the refinement's last spacing (5 mm as the thesis).
     """
-    t0 = time.perf_counter()
+    t0, cpu0 = time.perf_counter(), time.process_time()
     if kind not in (*KINDS, "auto"):
         raise LightError(f"kind: expected 'point', 'directional' or 'auto', got {kind!r}")
     if n_lights not in (1, 2):
@@ -158,6 +170,9 @@ def estimate_light(bodies, cameras, shadow_masks, *, frames: list[int] | None = 
     cameras = list(cameras)
     sf = [ShadowFrame.build(frames[i], bodies[i][0], bodies[i][1], cameras, shadow_masks[i], level=level)
           for i in keep]
+    grid_level = coarse_level(cameras, level)
+    sg = [ShadowFrame.build(frames[i], bodies[i][0], bodies[i][1], cameras, shadow_masks[i], level=grid_level)
+          for i in keep[::2]]
     centre = np.mean([f.vertices.mean(axis=0) for f in sf], axis=0)
     if ground is None:
         centre[2] = 0.0
@@ -167,17 +182,18 @@ def estimate_light(bodies, cameras, shadow_masks, *, frames: list[int] | None = 
     top = float(max(f.vertices[:, 2].max() for f in sf))
     timings = {"prepare": time.perf_counter() - t0}
     kinds = list(KINDS) if kind == "auto" else [kind]
-    with evaluators({"all": sf, "coarse": sf[::2]}, cameras, ground, workers) as ev:
+    with evaluators({"all": sf, "coarse": sf[::2], "grid": sg}, cameras, ground, workers) as ev:
         from studio.light.objective import ShadowObjective
 
         probe = ShadowObjective(sf, cameras, ground)
         empty = probe.empty_cost()
-        empty_coarse = ShadowObjective(sf[::2], cameras, ground).empty_cost()
+        empty_coarse = ShadowObjective(sg, cameras, ground).empty_cost()
         n_terms = probe.n_terms
         results = {}
         for k in kinds:
             t = time.perf_counter()
-            results[k] = search_lights(ev["all"], k, frame, top, n_lights, coarse=ev["coarse"], stop_m=stop_m,
+            results[k] = search_lights(ev["all"], k, frame, top, n_lights, coarse=ev["coarse"], grid=ev["grid"],
+                                       stop_m=stop_m,
                                        hopeless=lambda c: c > HOPELESS * empty_coarse)
             timings[f"search_{k}"] = time.perf_counter() - t
         candidates = {k: {"cost": r.cost, "coarse_cost": r.coarse_cost, "n_evaluations": r.n_evaluations,
@@ -205,10 +221,11 @@ def estimate_light(bodies, cameras, shadow_masks, *, frames: list[int] | None = 
     d = N_PARAMS[best]
     intervals = [summarise(best, th, post.samples[:, j * d:(j + 1) * d], frame) for j, th in enumerate(thetas)]
     timings["total"] = time.perf_counter() - t0
+    timings["cpu_this_process"] = time.process_time() - cpu0
     n_eval = sum(r.n_evaluations for r in results.values()) + post.n_evaluations
     log.info("light: %s at %s, cost %.2f, %d evaluations in %.1f s", best,
              [to_light(best, th, frame) for th in thetas], cost, n_eval, timings["total"])
     return LightEstimate(best, [to_light(best, th, frame) for th in thetas], thetas, cost, empty, intervals, post,
                          centre, candidates, timings, [frames[i] for i in keep], n_eval,
-                         {"kind": kind, "n_lights": n_lights, "level": level, "workers": workers,
+                         {"kind": kind, "n_lights": n_lights, "level": level, "grid_level": grid_level, "workers": workers,
                           "n_steps": n_steps, "stop_m": stop_m, "seed": seed})

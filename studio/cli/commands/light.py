@@ -27,7 +27,9 @@ def register(subparsers) -> None:
                    help="bodies casting the shadows: fitted (fit/) or, for a simulated session, the truth")  # fmt: skip
     p.add_argument("--shadows", default="segmentation", choices=["segmentation", "truth"],
                    help="observed shadows: the segmentation's label 2 or, for a simulated session, the true labels")  # fmt: skip
-    p.add_argument("--workers", type=int, default=2, help="processes scoring the hypotheses (default: %(default)s)")
+    p.add_argument("--workers", type=int, default=1,
+                   help="processes scoring the hypotheses (default: %(default)s; the compiled objective scores 10 "
+                        "frames in a few CPU seconds, less than starting more processes costs)")  # fmt: skip
     p.add_argument("--steps", type=int, default=40, help="MCMC steps per walker (default: %(default)s)")
     p.add_argument("--seed", type=int, default=0, help="random seed of the sampler (default: %(default)s)")
     p.add_argument("--out", type=Path, default=None,

@@ -140,8 +140,8 @@ def fit_unit(spec: dict, frame: int, previous: dict | None) -> dict:
     prev = previous or {}
     pose = None if prev.get("pose") is None else np.asarray(prev["pose"], float)
     gender = prev.get("gender") or spec["gender"]
-    screen = screen_masks(cameras, masks)
     extra = _shadow_inputs(ws, frame, spec.get("shadows"))
+    screen = screen_masks(cameras, masks, shadow=bool(extra.get("lights")))
     try:
         if pose is None:  # the chain's first fitted frame: from the silhouettes, shape free
             fit = fit_frame_gender(cameras, masks, gender, frame=frame, options=options, seed=seed, screen=screen,

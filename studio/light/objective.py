@@ -172,10 +172,14 @@ class ShadowObjective:
         """Number of (frame, view) terms of the sum."""
         return sum(len(f.target) for f in self.frames)
 
-    def terms(self, hypotheses) -> np.ndarray:
-        """(N, T, K) ``D(S^e_{k,t}, S^o_{k,t})`` of each hypothesis (a list of lights), frame and view."""
+    def terms(self, hypotheses, ground=None) -> np.ndarray:
+        """(N, T, K) ``D(S^e_{k,t}, S^o_{k,t})`` of each hypothesis (a list of lights), frame and
+        view; the shadows cast on ``ground`` (default: the objective's)."""
         from studio.light._kernels import shadow_chamfer
+        from studio.render.shadow import _plane
 
+        ground = self.ground if ground is None else ground
+        plane = self._plane if ground is self.ground else np.append(*_plane(ground))
         hypotheses = [list(h) for h in hypotheses]
         self.n_evaluations += len(hypotheses)
         lights = _pack_lights(hypotheses) if hypotheses else None
@@ -183,7 +187,7 @@ class ShadowObjective:
         for t, (f, pk) in enumerate(zip(self.frames, self._packed, strict=True)):
             ok = np.zeros(len(hypotheses), bool)
             if pk is not None and lights is not None:
-                raw, ok = shadow_chamfer(*pk.mesh, lights, self._plane, self.matrices, pk.occ, pk.dmaps, *pk.obs,
+                raw, ok = shadow_chamfer(*pk.mesh, lights, plane, self.matrices, pk.occ, pk.dmaps, *pk.obs,
                                          f.target.tau_level)
                 xi, counts = f.target.xi, np.asarray(f.target.counts, float)
                 with np.errstate(divide="ignore", invalid="ignore"):
@@ -191,7 +195,7 @@ class ShadowObjective:
                     bwd = np.where(counts > 0, raw[..., 1] / counts ** xi, 0.0)
                 out[:, t] = (fwd + bwd) * f.target.unit_factor
             for i in np.flatnonzero(~ok):
-                out[i, t] = silhouette_cost(f.target, predicted_shadows(f, self.cameras, hypotheses[i], self.ground,
+                out[i, t] = silhouette_cost(f.target, predicted_shadows(f, self.cameras, hypotheses[i], ground,
                                                                         self.matrices)).per_view
         return out
 
@@ -202,9 +206,13 @@ class ShadowObjective:
     def __call__(self, lights) -> float:
         return float(self.per_view(lights).sum())
 
-    def many(self, hypotheses) -> np.ndarray:
-        """(N,) costs of a list of hypotheses (each a list of lights)."""
-        return self.terms(hypotheses).sum(axis=(1, 2))
+    def many(self, hypotheses, ground=None) -> np.ndarray:
+        """(N,) costs of a list of hypotheses (each a list of lights), cast on ``ground`` (default: the objective's)."""
+        return self.terms(hypotheses, ground).sum(axis=(1, 2))
+
+    def planes(self, lights, grounds) -> np.ndarray:
+        """(N,) costs of ``lights`` casting their shadows on each of ``grounds`` (the floor's refinement)."""
+        return np.array([self.many([lights], g)[0] for g in grounds])
 
     def empty_cost(self) -> float:
         """E with no predicted shadow at all: what a light casting nothing visible would score."""

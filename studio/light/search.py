@@ -22,7 +22,7 @@ import numpy as np
 
 from studio.light.params import Frame, above_bodies, coarse_grid, coarse_steps, param_bounds, to_light
 
-__all__ = ["SearchResult", "refine_grid", "search_lights", "step_size_m"]
+__all__ = ["SearchResult", "polish_lights", "refine_grid", "search_lights", "step_size_m"]
 
 log = logging.getLogger(__name__)
 
@@ -101,6 +101,38 @@ def refine_grid(cost, x0: np.ndarray, c0: float, step: np.ndarray, lo: np.ndarra
     return x, c, rounds, evals
 
 
+def _cost(evaluate, kind: str, frame: Frame, body_top: float, held: list):
+    """(N, D) parameters of one light → (N,) costs with the ``held`` lights' parameters (inf
+    where a point light is not above the bodies)."""
+    def cost(X):
+        ok = np.array([above_bodies(kind, x, body_top) for x in X], bool)
+        out = np.full(len(X), np.inf)
+        if ok.any():
+            out[ok] = evaluate([[to_light(kind, x, frame), *[to_light(kind, h, frame) for h in held]] for x in X[ok]])
+        return out
+    return cost
+
+
+def polish_lights(evaluate, kind: str, frame: Frame, body_top: float, thetas: list, *,
+                  stop_m: float = STOP_M) -> tuple[list, float, int]:
+    """:func:`search_lights`' last stage again from ``thetas`` (e.g. once the floor changed): per
+    light, the others held, a 7×7×7 round at 3 × ``stop_m`` then one at ``stop_m``. Returns
+    (thetas, cost, evaluations)."""
+    lo, hi = param_bounds(kind, body_top)
+    stop = stop_m if kind == "point" else stop_m * STOP_RAD / STOP_M
+    step0 = coarse_steps(kind, body_top)
+    thetas = [np.asarray(t, float).copy() for t in thetas]
+    c, evals = np.inf, 0
+    for i in range(len(thetas)):
+        cost = _cost(evaluate, kind, frame, body_top, [t for j, t in enumerate(thetas) if j != i])
+        c = float(cost(thetas[i][None])[0])
+        step = step0 * 3.0 * stop / step_size_m(kind, thetas[i], step0, frame)  # first round: 3 × stop
+        thetas[i], c, _, e = refine_grid(cost, thetas[i], c, step * 3.0, lo, hi,
+                                         done=lambda x, s: step_size_m(kind, x, s, frame) < stop * (1 + 1e-9))
+        evals += e + 1
+    return thetas, c, evals
+
+
 def search_lights(evaluate, kind: str, frame: Frame, body_top: float, n_lights: int = 1, *,
                   coarse=None, grid=None, stop_m: float = STOP_M, hopeless=None) -> SearchResult:
     """The light(s) of ``kind`` minimising eq. 5.9; ``evaluate`` maps a list of hypotheses
@@ -123,14 +155,7 @@ def search_lights(evaluate, kind: str, frame: Frame, body_top: float, n_lights: 
     unit = 1.0 if kind == "point" else STOP_RAD / STOP_M  # metres → this kind's step measure
 
     def cost_with(held, evaluate):
-        def cost(X):
-            ok = np.array([above_bodies(kind, x, body_top) for x in X], bool)
-            out = np.full(len(X), np.inf)
-            if ok.any():
-                out[ok] = evaluate([[to_light(kind, x, frame), *[to_light(kind, h, frame) for h in held]]
-                                    for x in X[ok]])
-            return out
-        return cost
+        return _cost(evaluate, kind, frame, body_top, held)
 
     def below(limit):
         return lambda x, step: step_size_m(kind, x, step, frame) < limit

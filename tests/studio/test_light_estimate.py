@@ -91,6 +91,32 @@ def test_recovers_a_directional_light(bodies):
     assert "position" not in out and len(out["direction"]) == 3 and ang <= out["direction_ci_deg"]
 
 
+def test_refine_floor_recovers_a_tilted_lowered_floor(bodies):
+    """Shadows cast on a floor 3 cm below the calibration's and tilted 1.6°: the refined plane is
+    within 0.15° of its normal and 5 mm of its height at the subject, and explains the shadows
+    (cost) far better than the calibration's plane."""
+    from calibration import GroundPlane
+    from studio.light.floor import describe_floor
+    from studio.render import shadow_silhouettes, silhouette
+
+    light = PointLight([1.4, -1.1, 3.3])
+    tilt = np.radians(1.5)
+    true = GroundPlane.from_point_normal(np.array([0.0, 0.0, -0.03]), [np.sin(tilt), 0.3 * np.sin(tilt), 1.0])
+    masks = [[s & ~silhouette(c, V, F) for s, c in zip(shadow_silhouettes(CAMS, V, F, [light], true), CAMS, strict=True)]
+             for V, F in bodies]
+    est = estimate_light(bodies, CAMS, masks, kind="point", level=0, n_steps=10, stop_m=0.02, refine_floor=True)
+    truth = describe_floor(true, GroundPlane.floor(), est.centre)
+    out = est.to_json()["floor"]
+    assert _angle(np.asarray(out["normal"]), np.asarray(truth["normal"])) < 0.15, (out, truth)
+    assert abs(out["height_at_centre_m"] - truth["height_at_centre_m"]) < 0.005, (out, truth)
+    assert out["calibration"] == {"normal": [0.0, 0.0, 1.0], "offset": 0.0} and est.settings["refine_floor"]
+    # the floor's height trades against the light's distance: the direction holds, the distance within 3 %
+    frame = Frame(est.centre)
+    assert _angle(direction_of(est.lights[0], frame), direction_of(light, frame)) < 0.5
+    assert abs(np.linalg.norm(est.lights[0].position - est.centre) / np.linalg.norm(light.position - est.centre) - 1) < 0.03
+    assert est.cost < 0.2 * est.candidates["point"]["cost"]  # the calibration's floor explains them worse
+
+
 def test_no_visible_shadow_is_refused(bodies):
     with pytest.raises(LightError, match=r"no visible shadow: 0 of 3 frame\(s\)"):
         estimate_light(bodies, CAMS, _masks(bodies, []))

@@ -79,13 +79,14 @@ def shadow_chamfer(V, n, na, sign, eu, ev, f_uv, f_vu, lights, plane, M, occ, dm
     the observed ``C^τ(S^o)``; the observed pixels of view k are ``(obs_y, obs_x)[obs_start[k]:
     obs_start[k + 1]]``; ``tau`` in level pixels.
 
-    Returns (N, C, 3) ``[Σ_{S^e} C^τ(S^o), Σ_{S^o} C^τ(S^e), |S^e|]`` and (N,) bool ``ok``
-    (False: the outline fast path does not apply, or a shadow point is behind a camera).
+    Returns (N, C, 3) ``[Σ_{S^e} C^τ(S^o), Σ_{S^o} C^τ(S^e), |S^e|]`` and (N, C) bool ``ok``
+    (False: the outline fast path does not apply to the hypothesis, or a shadow point is behind
+    that camera; those terms are left at 0 for the caller to compute).
     """
     N, J = lights.shape[0], lights.shape[1]
     C, h, w = occ.shape
     out = np.zeros((N, C, 3))
-    ok = np.ones(N, dtype=np.bool_)
+    ok = np.ones((N, C), dtype=np.bool_)
     facing = np.empty(n.shape[0], dtype=np.bool_)
     seg = np.empty((J * eu.shape[0], 6))
     uv = np.empty((J * eu.shape[0], 4))
@@ -99,7 +100,7 @@ def shadow_chamfer(V, n, na, sign, eu, ev, f_uv, f_vu, lights, plane, M, occ, dm
             if m < 0:
                 break
         if m < 0:
-            ok[i] = False
+            ok[i, :] = False
             continue
         for k in range(C):
             behind = False
@@ -112,8 +113,8 @@ def shadow_chamfer(V, n, na, sign, eu, ev, f_uv, f_vu, lights, plane, M, occ, dm
                     uv[s, 2 * j] = (M[k, 0, 0] * x + M[k, 0, 1] * y + M[k, 0, 2] * z + M[k, 0, 3]) / zc
                     uv[s, 2 * j + 1] = (M[k, 1, 0] * x + M[k, 1, 1] * y + M[k, 1, 2] * z + M[k, 1, 3]) / zc
             if behind:
-                ok[i] = False
-                break
+                ok[i, k] = False
+                continue
             # winding fill (as studio.render.winding.winding_fill)
             ya, yb, xa, xb = h, -1, w, -1
             for s in range(m):

@@ -149,8 +149,9 @@ class ShadowObjective:
     floor z = 0). Call with a list of lights (their union casts the shadows).
 
     Hypotheses are scored by the compiled :func:`studio.light._kernels.shadow_chamfer` (the
-    same numbers as :func:`predicted_shadows` then :func:`studio.cost.silhouette_cost`, which
-    score what it cannot: an open mesh, a shadow point behind a camera)."""
+    same numbers as :func:`predicted_shadows` then :func:`studio.cost.silhouette_cost`); what it
+    cannot score (an open mesh, a light below a contour vertex; a view with a shadow point behind
+    its camera) is rendered exactly (:func:`studio.render.shadow_silhouettes`), that view only."""
 
     def __init__(self, frames: Sequence[ShadowFrame], cameras: Sequence, ground=None):
         from studio.render.shadow import _plane
@@ -175,6 +176,7 @@ class ShadowObjective:
     def terms(self, hypotheses, ground=None) -> np.ndarray:
         """(N, T, K) ``D(S^e_{k,t}, S^o_{k,t})`` of each hypothesis (a list of lights), frame and
         view; the shadows cast on ``ground`` (default: the objective's)."""
+        from studio.cost.silhouette import _score_view
         from studio.light._kernels import shadow_chamfer
         from studio.render.shadow import _plane
 
@@ -183,20 +185,23 @@ class ShadowObjective:
         hypotheses = [list(h) for h in hypotheses]
         self.n_evaluations += len(hypotheses)
         lights = _pack_lights(hypotheses) if hypotheses else None
-        out = np.empty((len(hypotheses), len(self.frames), len(self.frames[0].target)))
+        n_views = len(self.frames[0].target)
+        out = np.empty((len(hypotheses), len(self.frames), n_views))
         for t, (f, pk) in enumerate(zip(self.frames, self._packed, strict=True)):
-            ok = np.zeros(len(hypotheses), bool)
             if pk is not None and lights is not None:
                 raw, ok = shadow_chamfer(*pk.mesh, lights, plane, self.matrices, pk.occ, pk.dmaps, *pk.obs,
                                          f.target.tau_level)
-                xi, counts = f.target.xi, np.asarray(f.target.counts, float)
-                with np.errstate(divide="ignore", invalid="ignore"):
-                    fwd = np.where(raw[..., 2] > 0, raw[..., 0] / raw[..., 2] ** xi, 0.0)
-                    bwd = np.where(counts > 0, raw[..., 1] / counts ** xi, 0.0)
-                out[:, t] = (fwd + bwd) * f.target.unit_factor
-            for i in np.flatnonzero(~ok):
-                out[i, t] = silhouette_cost(f.target, predicted_shadows(f, self.cameras, hypotheses[i], ground,
-                                                                        self.matrices)).per_view
+            else:
+                raw, ok = np.zeros((len(hypotheses), n_views, 3)), np.zeros((len(hypotheses), n_views), bool)
+            for i, k in zip(*np.nonzero(~ok), strict=True):  # the renderer's exact path, this view only
+                mask = shadow_silhouettes([self.cameras[k]], f.vertices, f.faces, hypotheses[i], ground,
+                                          normals=f.normals, topology=f.topology, occluders=[f.occluders[k]])[0]
+                raw[i, k] = _score_view(f.target, k, mask)
+            xi, counts = f.target.xi, np.asarray(f.target.counts, float)
+            with np.errstate(divide="ignore", invalid="ignore"):  # eq. 4.4's normalisation, 0 for an empty side
+                fwd = np.where(raw[..., 2] > 0, raw[..., 0] / raw[..., 2] ** xi, 0.0)
+                bwd = np.where(counts > 0, raw[..., 1] / counts ** xi, 0.0)
+            out[:, t] = (fwd + bwd) * f.target.unit_factor
         return out
 
     def per_view(self, lights) -> np.ndarray:

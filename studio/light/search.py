@@ -154,21 +154,18 @@ def search_lights(evaluate, kind: str, frame: Frame, body_top: float, n_lights: 
     stop = stop_m if kind == "point" else stop_m * STOP_RAD / STOP_M
     unit = 1.0 if kind == "point" else STOP_RAD / STOP_M  # metres → this kind's step measure
 
-    def cost_with(held, evaluate):
-        return _cost(evaluate, kind, frame, body_top, held)
-
     def below(limit):
         return lambda x, step: step_size_m(kind, x, step, frame) < limit
 
     if n_lights not in (1, 2):
         raise ValueError(f"n_lights: expected 1 or 2, got {n_lights}")
-    C = cost_with([], grid_eval)(hyps)
+    C = _cost(grid_eval, kind, frame, body_top, [])(hyps)
     evals = len(hyps)
     k = int(np.argmin(C))
     thetas = [hyps[k].copy()]
     coarse_best = float(C[k])
     if n_lights == 2:
-        C2 = cost_with(thetas, grid_eval)(hyps)
+        C2 = _cost(grid_eval, kind, frame, body_top, thetas)(hyps)
         evals += len(hyps)
         # the second light must be somewhere else: skip the hypothesis of the first one
         k2 = int(np.argmin(np.where(np.all(np.isclose(hyps, thetas[0]), axis=1), np.inf, C2)))
@@ -185,11 +182,11 @@ def search_lights(evaluate, kind: str, frame: Frame, body_top: float, n_lights: 
             held = [t for j, t in enumerate(thetas) if j != i]
             x, step, rounds = thetas[i], step0 / 9.0 ** sweep, []
             for s, (ev, done, name) in enumerate(stages):
-                cost = cost_with(held, ev)
+                cost = _cost(ev, kind, frame, body_top, held)
                 c = float(cost(x[None])[0])  # the stages' costs differ (frames, image level)
                 evals += 1
-                if s == len(stages) - 1:  # the last round at the thesis' spacing (stop_m)
-                    step = step / 3.0 * min(1.0, stop / max(step_size_m(kind, x, step / 3.0, frame), 1e-12)) * 3.0
+                if s == len(stages) - 1:  # the last round at the thesis' spacing (stop_m), not below
+                    step = step * min(1.0, stop / max(step_size_m(kind, x, step / 3.0, frame), 1e-12))
                 x, c, more, e = refine_grid(cost, x, c, step, lo, hi, done=done)
                 evals += e
                 rounds += [dict(r, frames=name) for r in more]

@@ -11,6 +11,8 @@ silhouettes, as variants:
 
 - ``silhouette``: the silhouette term only (a monocular frame: the quality gates flag it);
 - ``shadow``: plus the shadow term (eq. 5.7, weight 1) with the simulator's true light;
+- ``silhouette_sequence``, ``shadow_sequence`` (``--sequence``): the same two, the frames fitted
+  in order, each also started from the previous frame's answer (one more start, not tracking);
 - ``shadow_estimated`` (``--estimated``): plus the shadow term with the light estimated by
   :func:`studio.light.estimate_light` from the ``silhouette`` fits and the segmented shadows
   (the thesis' procedure: fit without shadows, estimate the light, fit again).
@@ -20,7 +22,7 @@ mesh and to the true body mapped into our topology (as ``benchmarks/fit_accuracy
 fitted frame is cached as JSON under ``benchmarks/results/monocular/`` (a rerun fits only what is
 missing); the summary goes to ``benchmarks/results/monocular.json``.
 
-    .venv/bin/python benchmarks/monocular.py [--frames 0:24:4] [--workers 2] [--estimated] [--quick]
+    .venv/bin/python benchmarks/monocular.py [--frames 0:24:4] [--workers 2] [--sequence] [--estimated] [--quick]
 """
 
 from __future__ import annotations
@@ -39,7 +41,7 @@ sys.path.insert(0, str(ROOT))
 SPEC = ROOT / "studio" / "samples" / "mono_shadow" / "spec.yaml"
 THESIS = {"silhouette_mm": 122.0, "shadow_mm": 63.0}
 TARGET_MM = 40.0
-VARIANTS = ("silhouette", "shadow", "shadow_estimated")
+VARIANTS = ("silhouette", "shadow", "silhouette_sequence", "shadow_sequence", "shadow_estimated")
 
 
 def _masks(ws, frame: int, labels: str) -> tuple[list, list]:
@@ -71,8 +73,9 @@ def _fit_one(job: dict) -> dict:
         extra = {"lights": [light_from_dict(d) for d in job["lights"]], "shadow_masks": shadows,
                  "ground": getattr(ws.calibration, "ground", None)}
     t, c = time.perf_counter(), time.process_time()
+    hint = None if job.get("hint_pose") is None else np.asarray(job["hint_pose"], float)
     fit = fit_frame(model, ws.cameras, masks, frame=f, options=FitOptions(**job["options"]), seed=job.get("seed", f),
-                    **extra)
+                    hint_pose=hint, **extra)
     V = model.vertices(fit.shape, fit.pose)
     err, per_joint = joint_error(model, V, true_mesh(ws.path, f))
     return {"frame": f, "variant": job["variant"], "sex": job["sex"], "joint_mm": 1000 * err,
@@ -83,6 +86,22 @@ def _fit_one(job: dict) -> dict:
             "costs": {k: v for k, v in fit.costs.items() if isinstance(v, float)},
             "time_s": time.perf_counter() - t, "cpu_s": time.process_time() - c,
             "shape": fit.shape.tolist(), "pose": fit.pose.tolist(), "lights": job["lights"]}
+
+
+def _fit_chain(jobs: list[dict], paths: list[str]) -> list[dict]:
+    """Worker: fit ``jobs`` (frames in order) one after the other, each started also from the
+    previous frame's fitted pose (``hint_pose``: one more start, not tracking); cached in ``paths``."""
+    from rigs.atomic import atomic_write_json
+
+    out, previous = [], None
+    for job, path in zip(jobs, paths, strict=True):
+        r = json.loads(Path(path).read_text()) if Path(path).is_file() else None
+        if r is None:
+            r = _fit_one(dict(job, hint_pose=previous))
+            atomic_write_json(Path(path), r)
+        out.append(r)
+        previous = r["pose"]
+    return out
 
 
 def _estimated_light(ws, frames: list[int], rows: dict, labels: str, out: Path) -> list[dict]:
@@ -124,6 +143,8 @@ def main(argv=None) -> int:
     ap.add_argument("--labels", choices=["segmentation", "truth"], default="segmentation")
     ap.add_argument("--estimated", action="store_true", help="also fit with the light estimated from the "
                                                              "silhouette-only fits")
+    ap.add_argument("--sequence", action="store_true", help="also fit both variants frame after frame, each "
+                                                            "started also from the previous frame's answer")
     ap.add_argument("--quick", action="store_true", help="the fit's quick settings (a smaller budget)")
     ap.add_argument("--out", type=Path, default=ROOT / "benchmarks" / "results" / "monocular")
     args = ap.parse_args(argv)
@@ -159,6 +180,16 @@ def main(argv=None) -> int:
     run("silhouette", None)
     run("shadow", true_lights)
     variants = ["silhouette", "shadow"]
+    if args.sequence:  # both variants again, each frame also started from the previous frame's answer
+        chains = {f"{v}_sequence": lights for v, lights in (("silhouette", None), ("shadow", true_lights))}
+        with worker_pool(min(args.workers, 2)) as pool:
+            futures = [pool.submit(_fit_chain, [{"session": str(session), "frame": f, "variant": v, "sex": truth["sex"],
+                                                 "labels": args.labels, "options": options.to_dict(), "lights": lights}
+                                                for f in frames], [str(path(v, f)) for f in frames])
+                       for v, lights in chains.items()]
+            for fut in futures:
+                fut.result()
+        variants += list(chains)
     light_note = None
     if args.estimated:
         from studio.light import LightError

@@ -67,6 +67,58 @@ def _contour_shadows(V, n, na, sign, eu, ev, f_uv, f_vu, light, plane, facing, s
 
 
 @njit(cache=True, nogil=True)
+def _clip_and_project(seg, m, Mk, plane, uv):  # pragma: no cover - compiled
+    """Project the ``m`` floor segments of ``seg`` into the camera ``Mk`` (3, 4) as ``uv`` rows
+    (u0, v0, u1, v1); returns the row count. Floor points closer to the camera's plane than
+    ``NEAR`` (behind it included) are first moved along the floor onto the line at depth ``NEAR``:
+    a segment crossing it is split there and its far part replaced by its projection onto the
+    line. The outline stays closed and, the moved points never crossing a point in front, the
+    winding number of every floor point in front is unchanged (the fill is that of the exact
+    renderer, which drops what is behind the camera)."""
+    near = 1e-2
+    r0, r1, r2, r3 = Mk[2, 0], Mk[2, 1], Mk[2, 2], Mk[2, 3]
+    nx, ny, nz = plane[0], plane[1], plane[2]
+    rn = r0 * nx + r1 * ny + r2 * nz
+    gx, gy, gz = r0 - rn * nx, r1 - rn * ny, r2 - rn * nz  # depth's steepest ascent along the floor
+    gg = gx * gx + gy * gy + gz * gz
+    out = 0
+    pts = np.empty((3, 3))
+    for s in range(m):
+        px, py, pz, qx, qy, qz = seg[s, 0], seg[s, 1], seg[s, 2], seg[s, 3], seg[s, 4], seg[s, 5]
+        zp = r0 * px + r1 * py + r2 * pz + r3
+        zq = r0 * qx + r1 * qy + r2 * qz + r3
+        if zp >= near and zq >= near:
+            npts = 2
+            pts[0, 0], pts[0, 1], pts[0, 2] = px, py, pz
+            pts[1, 0], pts[1, 1], pts[1, 2] = qx, qy, qz
+        elif gg < 1e-18:  # the camera looks along the floor's normal and the floor is behind it
+            continue
+        else:
+            a = (near - zp) / gg if zp < near else 0.0
+            b = (near - zq) / gg if zq < near else 0.0
+            pts[0, 0], pts[0, 1], pts[0, 2] = px + a * gx, py + a * gy, pz + a * gz
+            if (zp < near) == (zq < near):  # both behind: the segment along the line
+                npts = 2
+                pts[1, 0], pts[1, 1], pts[1, 2] = qx + b * gx, qy + b * gy, qz + b * gz
+            else:  # split where it crosses the line
+                npts = 3
+                t = (near - zp) / (zq - zp)
+                pts[1, 0], pts[1, 1], pts[1, 2] = px + t * (qx - px), py + t * (qy - py), pz + t * (qz - pz)
+                pts[2, 0], pts[2, 1], pts[2, 2] = qx + b * gx, qy + b * gy, qz + b * gz
+        for j in range(npts):
+            x, y, z = pts[j, 0], pts[j, 1], pts[j, 2]
+            zc = max(r0 * x + r1 * y + r2 * z + r3, near)
+            u = (Mk[0, 0] * x + Mk[0, 1] * y + Mk[0, 2] * z + Mk[0, 3]) / zc
+            v = (Mk[1, 0] * x + Mk[1, 1] * y + Mk[1, 2] * z + Mk[1, 3]) / zc
+            if j > 0:
+                uv[out, 2], uv[out, 3] = u, v
+                out += 1
+            if j < npts - 1:
+                uv[out, 0], uv[out, 1] = u, v
+    return out
+
+
+@njit(cache=True, nogil=True)
 def shadow_chamfer(V, n, na, sign, eu, ev, f_uv, f_vu, lights, plane, M, occ, dmaps, obs_y, obs_x, obs_start,
                    tau):  # pragma: no cover - compiled
     """Chamfer numerators of eq. 4.4 between the visible predicted shadow and the observed one.
@@ -80,8 +132,9 @@ def shadow_chamfer(V, n, na, sign, eu, ev, f_uv, f_vu, lights, plane, M, occ, dm
     obs_start[k + 1]]``; ``tau`` in level pixels.
 
     Returns (N, C, 3) ``[Σ_{S^e} C^τ(S^o), Σ_{S^o} C^τ(S^e), |S^e|]`` and (N, C) bool ``ok``
-    (False: the outline fast path does not apply to the hypothesis, or a shadow point is behind
-    that camera; those terms are left at 0 for the caller to compute).
+    (False: the outline fast path does not apply to the hypothesis — a light below a contour
+    vertex, or shining upwards; those terms are left at 0 for the caller to compute). Shadow
+    points behind a camera are clipped (:func:`_clip_and_project`).
     """
     N, J = lights.shape[0], lights.shape[1]
     C, h, w = occ.shape
@@ -89,7 +142,7 @@ def shadow_chamfer(V, n, na, sign, eu, ev, f_uv, f_vu, lights, plane, M, occ, dm
     ok = np.ones((N, C), dtype=np.bool_)
     facing = np.empty(n.shape[0], dtype=np.bool_)
     seg = np.empty((J * eu.shape[0], 6))
-    uv = np.empty((J * eu.shape[0], 4))
+    uv = np.empty((2 * J * eu.shape[0], 4))
     diff = np.zeros((h, w + 1), dtype=np.int32)
     model = np.zeros((h, w), dtype=np.bool_)
     r = int(np.ceil(tau))
@@ -103,21 +156,10 @@ def shadow_chamfer(V, n, na, sign, eu, ev, f_uv, f_vu, lights, plane, M, occ, dm
             ok[i, :] = False
             continue
         for k in range(C):
-            behind = False
-            for s in range(m):
-                for j in range(2):
-                    x, y, z = seg[s, 3 * j], seg[s, 3 * j + 1], seg[s, 3 * j + 2]
-                    zc = M[k, 2, 0] * x + M[k, 2, 1] * y + M[k, 2, 2] * z + M[k, 2, 3]
-                    if zc <= 1e-3:
-                        behind = True
-                    uv[s, 2 * j] = (M[k, 0, 0] * x + M[k, 0, 1] * y + M[k, 0, 2] * z + M[k, 0, 3]) / zc
-                    uv[s, 2 * j + 1] = (M[k, 1, 0] * x + M[k, 1, 1] * y + M[k, 1, 2] * z + M[k, 1, 3]) / zc
-            if behind:
-                ok[i, k] = False
-                continue
+            ms = _clip_and_project(seg, m, M[k], plane, uv)
             # winding fill (as studio.render.winding.winding_fill)
             ya, yb, xa, xb = h, -1, w, -1
-            for s in range(m):
+            for s in range(ms):
                 px, py, qx, qy = uv[s, 0], uv[s, 1], uv[s, 2], uv[s, 3]
                 ylo = max(np.ceil(min(py, qy)), 0.0)
                 yhi = min(np.ceil(max(py, qy)) - 1.0, h - 1.0)

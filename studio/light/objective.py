@@ -150,8 +150,8 @@ class ShadowObjective:
 
     Hypotheses are scored by the compiled :func:`studio.light._kernels.shadow_chamfer` (the
     same numbers as :func:`predicted_shadows` then :func:`studio.cost.silhouette_cost`); what it
-    cannot score (an open mesh, a light below a contour vertex; a view with a shadow point behind
-    its camera) is rendered exactly (:func:`studio.render.shadow_silhouettes`), that view only."""
+    cannot score (an open mesh, a light below a contour vertex) is rendered exactly
+    (:func:`studio.render.shadow_silhouettes`)."""
 
     def __init__(self, frames: Sequence[ShadowFrame], cameras: Sequence, ground=None):
         from studio.render.shadow import _plane
@@ -193,7 +193,7 @@ class ShadowObjective:
                                          f.target.tau_level)
             else:
                 raw, ok = np.zeros((len(hypotheses), n_views, 3)), np.zeros((len(hypotheses), n_views), bool)
-            for i, k in zip(*np.nonzero(~ok), strict=True):  # the renderer's exact path, this view only
+            for i, k in zip(*np.nonzero(~ok), strict=True):  # the renderer's exact path
                 mask = shadow_silhouettes([self.cameras[k]], f.vertices, f.faces, hypotheses[i], ground,
                                           normals=f.normals, topology=f.topology, occluders=[f.occluders[k]])[0]
                 raw[i, k] = _score_view(f.target, k, mask)

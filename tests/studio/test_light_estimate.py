@@ -40,8 +40,8 @@ def test_params_round_trip():
 def test_compiled_objective_matches_render_then_chamfer(bodies):
     """The compiled eq. 5.9 terms (studio.light._kernels) equal rendering the visible shadow
     (predicted_shadows) and scoring it (silhouette_cost), for point, directional and two lights
-    and at two levels; a light below the body's top, or a view its shadow reaches behind, takes
-    the exact path."""
+    and at two levels, a shadow reaching behind a camera included; a light below the body's top
+    takes the exact path."""
     from studio.cost import silhouette_cost
     from studio.light import ShadowFrame, ShadowObjective, predicted_shadows
 
@@ -52,7 +52,7 @@ def test_compiled_objective_matches_render_then_chamfer(bodies):
               [[PointLight([1.4, -1.1, 3.3]), PointLight(np.array([-1.5, 1.0, 3.0]) + rng.normal(0, 0.3, 3))]
                for _ in range(3)],
               [[PointLight([0.2, 0.1, 1.2])]],  # inside the body's height: no outline, the exact renderer
-              [[PointLight([3.0, 0.2, 2.0])]]]  # low: the shadow reaches behind a camera, that view exact
+              [[PointLight([3.0, 0.2, 2.0])]]]  # low: the shadow reaches behind a camera (clipped)
     for level in (0, 1):
         frames = [ShadowFrame.build(i, V, F, CAMS, m, level=level) for i, ((V, F), m) in enumerate(zip(bodies, masks))]
         obj = ShadowObjective(frames, CAMS)

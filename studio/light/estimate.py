@@ -3,8 +3,9 @@
 1. Refuse scenes whose shadows cannot fix a light: fewer than ``MIN_SHADOW_FRAMES`` frames with
    at least ``MIN_SHADOW_PIXELS`` observed shadow pixels in some view (:class:`LightError`).
 2. Search each candidate kind — ``point``, ``directional``, or both for ``auto`` — on the coarse
-   grid (288 hypotheses, every other frame, images at ``level`` + 1 if large enough) then 7×7×7 refinements down
-   to 5 mm, the last on every frame (:func:`studio.light.search.search_lights`, eq. 5.9).
+   grid (288 hypotheses, every other frame, images at ``level`` + 1 if large enough) then 7×7×7
+   refinements down to 5 mm, the last on every frame (:func:`studio.light.search.search_lights`,
+   eq. 5.9).
 3. ``auto`` keeps the kind with the lower Bayesian information criterion
    ``n ln(E/n) + k ln n`` (n the frame × view terms, k the parameters): a point light far away
    casts the shadows of a directional one, and then the simpler model wins.
@@ -31,8 +32,8 @@ from studio.light.pool import evaluators
 from studio.light.posterior import sample_posterior, summarise
 from studio.light.search import polish_lights, search_lights
 
-__all__ = ["GRID_MIN_PIXELS", "LightError", "LightEstimate", "MAX_UNEXPLAINED", "MIN_SHADOW_FRAMES", "MIN_SHADOW_PIXELS",
-           "estimate_light"]
+__all__ = ["GRID_MIN_PIXELS", "LightError", "LightEstimate", "MAX_UNEXPLAINED", "MIN_SHADOW_FRAMES",
+           "MIN_SHADOW_PIXELS", "coarse_level", "estimate_light"]
 
 log = logging.getLogger(__name__)
 
@@ -48,8 +49,6 @@ MAX_STORED_SAMPLES = 400
 HOPELESS = 0.8
 #: Floor refinement: alternations of the floor's grid (light held) and the light's last stage (floor held).
 FLOOR_SWEEPS = 2
-
-
 #: The coarse grid scores images half the working level's size while their smaller side keeps this many pixels.
 GRID_MIN_PIXELS = 60
 
@@ -165,8 +164,8 @@ def _refine_floor(evaluate, kind: str, thetas: list, frame: Frame, top: float, g
     base = GroundPlane.floor() if ground is None else ground
     x, step, n = None, None, 0
     for _ in range(FLOOR_SWEEPS):
-        x, _, rounds, e = refine_floor(evaluate, [to_light(kind, th, frame) for th in thetas], base, frame.centre, x,
-                                       step=step)
+        x, _, _, e = refine_floor(evaluate, [to_light(kind, th, frame) for th in thetas], base, frame.centre, x,
+                                  step=step)
         plane = plane_of(x, base, frame.centre)
         thetas, cost, e2 = polish_lights(functools.partial(evaluate, ground=plane), kind, frame, top, thetas,
                                          stop_m=stop_m)
@@ -183,8 +182,8 @@ def estimate_light(bodies, cameras, shadow_masks, *, frames: list[int] | None = 
 
     ``kind`` ``point``, ``directional`` or ``auto``; ``n_lights`` 1 or 2; ``ground`` the plane
     (None: floor z = 0); ``level`` the pyramid level the silhouettes are compared at (the coarse
-    grid and its first rounds at :func:`coarse_level`); ``workers``
-    processes score the hypotheses; ``stop_m`` the refinement's last spacing (5 mm as the thesis);
+    grid and its first rounds at :func:`coarse_level`); ``workers`` processes score the
+    hypotheses; ``stop_m`` the refinement's last spacing (5 mm as the thesis);
     ``refine_floor`` also refines the ground plane from the shadows (:mod:`studio.light.floor`),
     the posterior then sampled on the refined plane (``LightEstimate.floor``).
     """
@@ -225,8 +224,7 @@ def estimate_light(bodies, cameras, shadow_masks, *, frames: list[int] | None = 
         for k in kinds:
             t = time.perf_counter()
             results[k] = search_lights(ev["all"], k, frame, top, n_lights, coarse=ev["coarse"], grid=ev["grid"],
-                                       stop_m=stop_m,
-                                       hopeless=lambda c: c > HOPELESS * empty_coarse)
+                                       stop_m=stop_m, hopeless=lambda c: c > HOPELESS * empty_coarse)
             timings[f"search_{k}"] = time.perf_counter() - t
         candidates = {k: {"cost": r.cost, "coarse_cost": r.coarse_cost, "n_evaluations": r.n_evaluations,
                           "bic": _bic(r.cost, n_terms, N_PARAMS[k] * n_lights),
@@ -265,5 +263,6 @@ def estimate_light(bodies, cameras, shadow_masks, *, frames: list[int] | None = 
              [to_light(best, th, frame) for th in thetas], cost, n_eval, timings["total"])
     return LightEstimate(best, [to_light(best, th, frame) for th in thetas], thetas, cost, empty, intervals, post,
                          centre, candidates, timings, [frames[i] for i in keep], n_eval,
-                         {"kind": kind, "n_lights": n_lights, "level": level, "grid_level": grid_level, "workers": workers,
-                          "n_steps": n_steps, "stop_m": stop_m, "seed": seed, "refine_floor": refine_floor}, floor)
+                         {"kind": kind, "n_lights": n_lights, "level": level, "grid_level": grid_level,
+                          "workers": workers, "n_steps": n_steps, "stop_m": stop_m, "seed": seed,
+                          "refine_floor": refine_floor}, floor)

@@ -59,7 +59,8 @@ def describe_floor(plane, base, centre: np.ndarray) -> dict:
             "height_at_centre_m": float(height)}
 
 
-def refine_floor(evaluate, lights: list, base, centre: np.ndarray, x0=None, *, step=None) -> tuple[np.ndarray, float, list, int]:
+def refine_floor(evaluate, lights: list, base, centre: np.ndarray, x0=None, *,
+                 step=None) -> tuple[np.ndarray, float, list, int]:
     """The plane parameters (α, β, h) minimising eq. 5.9 with ``lights`` held; ``evaluate`` has
     ``planes(lights, grounds)`` → (N,) costs (:func:`studio.light.pool.evaluators`). Starts at
     ``x0`` (default the calibration's plane) with grids of spacing ``step`` / 3 (default

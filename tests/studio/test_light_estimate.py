@@ -61,6 +61,8 @@ def test_compiled_objective_matches_render_then_chamfer(bodies):
                      for f in frames] for h in hyps]
             np.testing.assert_allclose(obj.terms(hyps), slow, rtol=1e-6, atol=1e-6)
         assert obj.n_evaluations == 15
+    with pytest.raises(TypeError, match=r"light: expected PointLight or DirectionalLight, got object"):
+        obj.terms([[object()]])
 
 
 def test_recovers_a_known_point_light(bodies):
@@ -104,8 +106,8 @@ def test_refine_floor_recovers_a_tilted_lowered_floor(bodies):
     light = PointLight([1.4, -1.1, 3.3])
     tilt = np.radians(1.5)
     true = GroundPlane.from_point_normal(np.array([0.0, 0.0, -0.03]), [np.sin(tilt), 0.3 * np.sin(tilt), 1.0])
-    masks = [[s & ~silhouette(c, V, F) for s, c in zip(shadow_silhouettes(CAMS, V, F, [light], true), CAMS, strict=True)]
-             for V, F in bodies]
+    masks = [[s & ~silhouette(c, V, F) for s, c in zip(shadow_silhouettes(CAMS, V, F, [light], true), CAMS,
+                                                       strict=True)] for V, F in bodies]
     est = estimate_light(bodies, CAMS, masks, kind="point", level=0, n_steps=10, stop_m=0.02, refine_floor=True)
     truth = describe_floor(true, GroundPlane.floor(), est.centre)
     out = est.to_json()["floor"]
@@ -115,7 +117,8 @@ def test_refine_floor_recovers_a_tilted_lowered_floor(bodies):
     # the floor's height trades against the light's distance: the direction holds, the distance within 3 %
     frame = Frame(est.centre)
     assert _angle(direction_of(est.lights[0], frame), direction_of(light, frame)) < 0.5
-    assert abs(np.linalg.norm(est.lights[0].position - est.centre) / np.linalg.norm(light.position - est.centre) - 1) < 0.03
+    r_est, r_true = (np.linalg.norm(p - est.centre) for p in (est.lights[0].position, light.position))
+    assert abs(r_est / r_true - 1) < 0.03
     assert est.cost < 0.2 * est.candidates["point"]["cost"]  # the calibration's floor explains them worse
 
 

@@ -60,6 +60,12 @@ __all__ = ["FitOptions", "FrameFit", "fit_frame", "fit_frame_gender"]
 
 log = logging.getLogger(__name__)
 
+#: A frame fitted from one view: the particle filter's particles are multiplied by this and its
+#: layers increased by ``MONOCULAR_LAYERS`` (mono_shadow frame 8 with its shadow: 275 → 63 mm,
+#: +10 % CPU; benchmarks/monocular.py).
+MONOCULAR_PARTICLES = 2
+MONOCULAR_LAYERS = 2
+
 
 @dataclass(frozen=True)
 class FitOptions:
@@ -368,6 +374,8 @@ def fit_frame(
             starts = np.vstack([hint[None], starts])
         sigma = _pose_sigma(1.0)
         n_p, n_l = options.n_particles, options.n_layers
+        if len(cameras) == 1:  # one view leaves depth, heading and which leg is which open: search wider
+            n_p, n_l = MONOCULAR_PARTICLES * n_p, n_l + MONOCULAR_LAYERS
     else:
         starts = np.asarray(previous_pose, dtype=np.float64)[None]
         sigma = _pose_sigma(0.4)

@@ -238,7 +238,8 @@ def screen_masks(cameras, masks, *, shadow: bool = False) -> dict:
     others (the frame is then ``suspect``), or none when no view remains (``failed``). One view
     alone leaves the depth along its rays unobserved: with ``shadow`` (a known light, the shadow
     term of eq. 5.7) the cast shadow is the second view (thesis §5.5, the shadow camera);
-    without it the frame is fitted but ``suspect``, the reason naming the view.
+    without it a one-camera frame is fitted but ``suspect``, the reason naming the view, and a
+    rig left with one usable view is refused (``failed``: its segmentation failed).
     """
     from studio.fit.errors import FitError
 
@@ -277,11 +278,13 @@ def screen_masks(cameras, masks, *, shadow: bool = False) -> dict:
     used = [i for i, c in enumerate(cameras) if c.name not in dropped]
     if not used:
         reasons.append(Reason("views", "failed", "0 usable view(s): at least one (with a light) or two are needed"))
-    elif len(used) == 1:
+    elif len(used) == 1 and not shadow and len(cameras) > 1:  # a rig's views lost: a segmentation failure
+        reasons.append(Reason("views", "failed", f"1 usable view of {len(cameras)}: at least two are needed "
+                              "without a light's shadow"))
+    elif len(used) == 1 and not shadow:
         name = cameras[used[0]].name
-        if not shadow:
-            reasons.append(Reason("views", "suspect", f"one usable view ({name}) and no shadow term: the depth along "
-                                  "its rays is unobserved (a second camera or a light's shadow fixes it)", name))
+        reasons.append(Reason("views", "suspect", f"one usable view ({name}) and no shadow term: the depth along "
+                              "its rays is unobserved (a second camera or a light's shadow fixes it)", name))
     else:
         cams, ms = [cameras[i] for i in used], [masks[i] for i in used]
         try:

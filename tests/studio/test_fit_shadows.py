@@ -83,8 +83,8 @@ def test_fit_frame_reports_shadow_term_and_checks_masks(scene):
 def test_one_camera_is_fitted_with_a_light_and_flagged_without(scene):
     """One camera and its shadow (thesis §5.5): the frame is fitted, no reason about the views;
     the same camera without a light is fitted but flagged ``suspect``, the reason naming the view
-    (the tiny budget's fits are poor: other gates may flag them too); no usable view at all is
-    still refused."""
+    (the tiny budget's fits are poor: other gates may flag them too); no usable view at all, or
+    a rig left with one view and no light, is still refused."""
     from studio.fit import UnusableFrame
     from studio.fit.init import feet_on_floor
 
@@ -103,6 +103,12 @@ def test_one_camera_is_fitted_with_a_light_and_flagged_without(scene):
     assert "one usable view (cam0) and no shadow term" in reasons[0]["message"]
     with pytest.raises(UnusableFrame, match=r"0 usable view"):
         fit_frame(model, cams[:1], [np.zeros_like(sil[0])], options=tiny, lights=[LIGHT], shadow_masks=shadow)
+    empty = [labels[0] == 1, np.zeros_like(sil[0])]  # two cameras, one view lost: a failed segmentation
+    with pytest.raises(UnusableFrame, match=r"1 usable view of 2: at least two are needed without a light"):
+        fit_frame(model, cams, empty, options=tiny)
+    lost = fit_frame(model, cams, empty, shape=model.mean_shape(), options=tiny, lights=[LIGHT],
+                     shadow_masks=[lab == 2 for lab in labels])
+    assert "shadow" in lost.costs  # ... fitted from the view left and its shadow
 
 
 def test_fit_session_with_shadows_needs_a_light(tmp_path):

@@ -85,14 +85,18 @@ def _fit_one(job: dict) -> dict:
             "shape": fit.shape.tolist(), "pose": fit.pose.tolist(), "lights": job["lights"]}
 
 
-def _fit_chain(jobs: list[dict], paths: list[str]) -> list[dict]:
+def _fit_chain(jobs: list[dict], paths: list[str], first: str) -> list[dict]:
     """Worker: fit ``jobs`` (frames in order) one after the other, each started also from the
-    previous frame's fitted pose (``hint_pose``: one more start, not tracking); cached in ``paths``."""
+    previous frame's fitted pose (``hint_pose``: one more start, not tracking); cached in ``paths``.
+    The first frame has no previous one: its fit is the one-by-one variant's (``first``) when cached."""
     from rigs.atomic import atomic_write_json
 
     out, previous = [], None
     for job, path in zip(jobs, paths, strict=True):
         r = json.loads(Path(path).read_text()) if Path(path).is_file() else None
+        if r is None and previous is None and Path(first).is_file():
+            r = dict(json.loads(Path(first).read_text()), variant=job["variant"])
+            atomic_write_json(Path(path), r)
         if r is None:
             r = _fit_one(dict(job, hint_pose=previous))
             atomic_write_json(Path(path), r)
@@ -182,7 +186,8 @@ def main(argv=None) -> int:
         with worker_pool(min(args.workers, 2)) as pool:
             futures = [pool.submit(_fit_chain, [{"session": str(session), "frame": f, "variant": v, "sex": truth["sex"],
                                                  "labels": args.labels, "options": options.to_dict(), "lights": lights}
-                                                for f in frames], [str(path(v, f)) for f in frames])
+                                                for f in frames], [str(path(v, f)) for f in frames],
+                                   str(path(v.removesuffix("_sequence"), frames[0])))
                        for v, lights in chains.items()]
             for fut in futures:
                 fut.result()

@@ -4,8 +4,9 @@
    (coarse level for the search, full resolution for the end, §7.2.3).
 0. The silhouettes are screened (:func:`studio.fit.quality.screen_masks`): a view with an
    empty or all-image mask is left out, a frame with no usable view or views the visual hull
-   cannot reconcile is refused (:class:`~studio.fit.errors.UnusableFrame`); one view is fitted,
-   ``suspect`` unless a light's shadow (eq. 5.7) stands in for the second view (§5.5).
+   cannot reconcile is refused (:class:`~studio.fit.errors.UnusableFrame`); one view is fitted
+   when a light's shadow (eq. 5.7) stands in for the second (§5.5), or flagged ``suspect`` on a
+   one-camera rig; a rig left with one view and no light is refused.
 2. Without a previous pose, the start comes from the silhouettes: floor position from the
    visual hull (:mod:`studio.fit.init`), then (``start="library"``, the default) the lab
    posture library (:mod:`studio.fit.library`) matched over posture × stature × heading, its
@@ -297,8 +298,9 @@ def fit_frame(
 
     The silhouettes are screened first (``screen``: :func:`studio.fit.quality.screen_masks`,
     computed when None): views with an empty or all-image mask are left out, and a frame with
-    no usable view raises :class:`~studio.fit.errors.UnusableFrame` (one view without ``lights``
-    is fitted and flagged ``suspect``). The result
+    no usable view (or one of several, without ``lights``) raises
+    :class:`~studio.fit.errors.UnusableFrame`; one camera without ``lights`` is fitted and flagged
+    ``suspect``. The result
     carries the quality gates (:attr:`FrameFit.quality`).
 
     With ``lights`` (known point / directional lights) and ``shadow_masks`` (observed shadows,

@@ -94,6 +94,13 @@ def test_one_camera_is_fitted_with_a_light_and_flagged_without(scene):
                       rival_heading=False, find_support=False, start="stride")
     sil, shadow = [labels[0] == 1], [labels[0] == 2]
     assert np.linalg.norm(feet_on_floor(cams[0], sil[0]) - pose[:2]) < 0.25  # the monocular start
+    with pytest.raises(FitError, match=r"camera cam0: empty silhouette, no feet to put on the floor"):
+        feet_on_floor(cams[0], np.zeros_like(sil[0]))
+    from calibration import Camera
+
+    up = Camera.look_at("up", [0.0, 0.0, 0.5], [0.0, 0.1, 3.0], 170.0, (200, 150))
+    with pytest.raises(FitError, match=r"camera up: the feet's ray does not meet the floor"):
+        feet_on_floor(up, np.ones((150, 200), bool))
     lit = fit_frame(model, cams[:1], sil, shape=model.mean_shape(), options=tiny, lights=[LIGHT],
                     shadow_masks=shadow)
     assert "views" not in {r["check"] for r in lit.quality["reasons"]} and "shadow" in lit.costs

@@ -14,7 +14,7 @@ import numpy as np
 
 from studio.fit.errors import FitError
 
-__all__ = ["hull_centroid", "hull_height", "initial_poses", "standing_pose", "stride_poses"]
+__all__ = ["feet_on_floor", "hull_centroid", "hull_height", "initial_poses", "standing_pose", "stride_poses"]
 
 
 def _in_mask(cam, mask: np.ndarray, pts: np.ndarray) -> np.ndarray:
@@ -43,8 +43,11 @@ def hull_centroid(cameras, masks, *, extent: float = 3.5, step: float = 0.04,
     """Floor (x, y) of the visual-hull centroid (2,) from full-resolution ``masks`` (list, camera order).
 
     Only points seen inside the image of every camera count (the person must be in every view).
-    Raises :class:`FitError` when no grid point falls inside all silhouettes.
+    Raises :class:`FitError` when no grid point falls inside all silhouettes. One camera has no
+    hull: the floor point under the silhouette's lowest pixels (:func:`feet_on_floor`).
     """
+    if len(cameras) == 1:
+        return feet_on_floor(cameras[0], masks[0])
     g = np.arange(-extent, extent + 1e-9, step)
     X, Y = np.meshgrid(g, g, indexing="ij")
     pts = np.stack([np.repeat(X.ravel()[:, None], len(heights), 1).ravel(),
@@ -56,6 +59,20 @@ def hull_centroid(cameras, masks, *, extent: float = 3.5, step: float = 0.04,
     if not inside.any():
         raise FitError("no point of the floor grid lies inside every silhouette: is the person in view of all cameras?")
     return pts[inside, :2].mean(axis=0)
+
+
+def feet_on_floor(camera, mask: np.ndarray, *, share: float = 0.03, sole: float = 0.04) -> np.ndarray:
+    """Floor (x, y) (2,) under the feet seen by one camera: the mean of the silhouette's lowest
+    rows (``share`` of its height) back-projected onto the plane ``z = sole`` (a foot's centre
+    height). The monocular start: a camera looking down sees the feet lowest in the image."""
+    ys, xs = np.nonzero(np.asarray(mask, bool))
+    if len(ys) == 0:
+        raise FitError(f"camera {camera.name}: empty silhouette, no feet to put on the floor")
+    low = ys >= ys.max() - max(1.0, share * (ys.max() - ys.min()))
+    origin, d = camera.pixel_rays(np.array([[xs[low].mean(), ys[low].mean()]]))
+    if d[0, 2] >= -1e-6:
+        raise FitError(f"camera {camera.name}: the feet's ray does not meet the floor (camera looking up?)")
+    return (origin[0] + d[0] * (sole - origin[0, 2]) / d[0, 2])[:2]
 
 
 def standing_pose(model) -> np.ndarray:

@@ -229,13 +229,17 @@ def _hull_explained(cameras, masks, *, step: float = 0.03, factor: int = 4) -> l
     return out
 
 
-def screen_masks(cameras, masks) -> dict:
+def screen_masks(cameras, masks, *, shadow: bool = False) -> dict:
     """Segmentation sanity of one frame before fitting: ``{"views": {name: figures}, "reasons": [...],
     "status", "dropped": [names]}`` (see the module doc). ``cameras`` full-resolution, ``masks``
     (H, W) bool, same order.
 
     A view whose mask is empty or covers most of the image is *dropped*: the fit uses the
-    others (the frame is then ``suspect``), or none when fewer than two views remain (``failed``).
+    others (the frame is then ``suspect``), or none when no view remains (``failed``). One view
+    alone leaves the depth along its rays unobserved: with ``shadow`` (a known light, the shadow
+    term of eq. 5.7) the cast shadow is the second view (thesis §5.5, the shadow camera);
+    without it a one-camera frame is fitted but ``suspect``, the reason naming the view, and a
+    rig left with one usable view is refused (``failed``: its segmentation failed).
     """
     from studio.fit.errors import FitError
 
@@ -272,8 +276,15 @@ def screen_masks(cameras, masks) -> dict:
                 reasons.append(Reason("border", "suspect", f"the silhouette is cut by the image border ({border} "
                                       "pixels on the edge): part of the person is out of view", cam.name))
     used = [i for i, c in enumerate(cameras) if c.name not in dropped]
-    if len(used) < 2:
-        reasons.append(Reason("views", "failed", f"{len(used)} usable view(s): at least two are needed"))
+    if not used:
+        reasons.append(Reason("views", "failed", "0 usable view(s): at least one (with a light) or two are needed"))
+    elif len(used) == 1 and not shadow and len(cameras) > 1:  # a rig's views lost: a segmentation failure
+        reasons.append(Reason("views", "failed", f"1 usable view of {len(cameras)}: at least two are needed "
+                              "without a light's shadow"))
+    elif len(used) == 1 and not shadow:
+        name = cameras[used[0]].name
+        reasons.append(Reason("views", "suspect", f"one usable view ({name}) and no shadow term: the depth along "
+                              "its rays is unobserved (a second camera or a light's shadow fixes it)", name))
     else:
         cams, ms = [cameras[i] for i in used], [masks[i] for i in used]
         try:
@@ -288,7 +299,8 @@ def screen_masks(cameras, masks) -> dict:
                 reasons.append(Reason("hull", sev, f"only {100 * e:.0f}% of the silhouette is explained by the visual "
                                       "hull of all views: wrong calibration or wrong mask in some view", cam.name))
     out = [r.to_json() for r in reasons]
-    return {"views": views, "reasons": out, "status": status_of(out), "dropped": dropped}
+    return {"views": views, "reasons": out, "status": status_of(out), "dropped": dropped,
+            **({"shadow_view": True} if shadow and len(used) == 1 else {})}
 
 
 def refused_quality(screen: dict) -> dict:

@@ -100,17 +100,24 @@ def _images(ws, frame: int):
 
 def _shadow_inputs(ws, frame: int, shadows: dict | None) -> dict:
     """fit_frame's shadow arguments (eq. 5.7) when the spec asks for the shadow term: the lights of
-    ``light/light.json``, the frame's segmented shadows (label 2), the calibrated ground."""
+    ``light/light.json``, the frame's segmented shadows (label 2), the calibrated ground (or the
+    floor refined from the shadows, when ``light.json`` holds one)."""
     if not shadows:
         return {}
     from studio.light import LightError, load_light
 
     try:
-        lights, _ = load_light(ws.layout.light_json)
+        lights, light = load_light(ws.layout.light_json)
     except LightError as exc:
         raise FitError(str(exc)) from None
+    ground = getattr(ws.calibration, "ground", None)
+    if "floor" in light:  # refined from the shadows (`studio light --refine-floor`)
+        from calibration import GroundPlane
+
+        n = np.asarray(light["floor"]["normal"], float)
+        ground = GroundPlane(n / np.linalg.norm(n), float(light["floor"]["offset"]))
     return {"lights": lights, "shadow_masks": [ws.labels(c, frame) == 2 for c in ws.camera_names],
-            "shadow_weight": float(shadows.get("weight", 1.0)), "ground": getattr(ws.calibration, "ground", None)}
+            "shadow_weight": float(shadows.get("weight", 1.0)), "ground": ground}
 
 
 def fit_unit(spec: dict, frame: int, previous: dict | None) -> dict:
@@ -140,8 +147,8 @@ def fit_unit(spec: dict, frame: int, previous: dict | None) -> dict:
     prev = previous or {}
     pose = None if prev.get("pose") is None else np.asarray(prev["pose"], float)
     gender = prev.get("gender") or spec["gender"]
-    screen = screen_masks(cameras, masks)
     extra = _shadow_inputs(ws, frame, spec.get("shadows"))
+    screen = screen_masks(cameras, masks, shadow=bool(extra.get("lights")))
     try:
         if pose is None:  # the chain's first fitted frame: from the silhouettes, shape free
             fit = fit_frame_gender(cameras, masks, gender, frame=frame, options=options, seed=seed, screen=screen,

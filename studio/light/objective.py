@@ -100,12 +100,62 @@ def predicted_shadows(frame: ShadowFrame, cameras: Sequence, lights, ground=None
     return out
 
 
+def _pack_lights(hypotheses) -> np.ndarray | None:
+    """(N, J, 4) lights of hypotheses of J lights each (:func:`studio.light._kernels.shadow_chamfer`'s
+    layout); None when they are not all of the same size."""
+    from studio.render.lights import DirectionalLight, PointLight
+
+    if len({len(h) for h in hypotheses}) != 1:
+        return None
+    out = np.empty((len(hypotheses), len(hypotheses[0]), 4))
+    for i, hyp in enumerate(hypotheses):
+        for j, light in enumerate(hyp):
+            if isinstance(light, PointLight):
+                out[i, j, :3], out[i, j, 3] = light.position, 1.0
+            elif isinstance(light, DirectionalLight):
+                out[i, j, :3], out[i, j, 3] = light.direction, 0.0
+            else:
+                raise TypeError(f"light: expected PointLight or DirectionalLight, got {type(light).__name__}")
+    return out
+
+
+@dataclass(frozen=True, eq=False)
+class _Packed:
+    """One frame's arrays in :func:`studio.light._kernels.shadow_chamfer`'s layout."""
+
+    mesh: tuple
+    occ: np.ndarray
+    dmaps: np.ndarray
+    obs: tuple
+
+    @classmethod
+    def of(cls, frame: ShadowFrame) -> _Packed | None:
+        topo = frame.topology
+        if topo is None:
+            return None
+        t = frame.target
+        pixels = [np.nonzero(m) for m in t.masks]
+        start = np.cumsum([0] + [len(y) for y, _ in pixels]).astype(np.int64)
+        obs_y = np.concatenate([y for y, _ in pixels]).astype(np.int64)
+        obs_x = np.concatenate([x for _, x in pixels]).astype(np.int64)
+        n, na, sign = frame.normals
+        mesh = (frame.vertices, n, na, float(sign), topo.u, topo.v, topo.f_uv, topo.f_vu)
+        return cls(mesh, np.stack(frame.occluders), np.stack(t.distance_maps), (obs_y, obs_x, start))
+
+
 class ShadowObjective:
     """E(ℓ) of eq. 5.9 over ``frames`` (:class:`ShadowFrame`, all at one level) seen by
     ``cameras`` (full resolution, in the targets' order), shadows cast on ``ground`` (None: the
-    floor z = 0). Call with a list of lights (their union casts the shadows)."""
+    floor z = 0). Call with a list of lights (their union casts the shadows).
+
+    Hypotheses are scored by the compiled :func:`studio.light._kernels.shadow_chamfer` (the
+    same numbers as :func:`predicted_shadows` then :func:`studio.cost.silhouette_cost`); what it
+    cannot score (an open mesh, a light below a contour vertex) is rendered exactly
+    (:func:`studio.render.shadow_silhouettes`)."""
 
     def __init__(self, frames: Sequence[ShadowFrame], cameras: Sequence, ground=None):
+        from studio.render.shadow import _plane
+
         if not frames:
             raise ValueError("frames: at least one frame is needed")
         self.frames = list(frames)
@@ -113,6 +163,9 @@ class ShadowObjective:
         self.cameras = [level_camera(ideal_camera(c), level) for c in cameras]
         self.matrices = projection_matrices(self.cameras)
         self.ground = ground
+        normal, offset = _plane(ground)
+        self._plane = np.append(normal, offset)
+        self._packed = [_Packed.of(f) for f in self.frames]
         self.n_evaluations = 0
 
     @property
@@ -120,18 +173,51 @@ class ShadowObjective:
         """Number of (frame, view) terms of the sum."""
         return sum(len(f.target) for f in self.frames)
 
+    def terms(self, hypotheses, ground=None) -> np.ndarray:
+        """(N, T, K) ``D(S^e_{k,t}, S^o_{k,t})`` of each hypothesis (a list of lights), frame and
+        view; the shadows cast on ``ground`` (default: the objective's)."""
+        from studio.cost.silhouette import _score_view
+        from studio.light._kernels import shadow_chamfer
+        from studio.render.shadow import _plane
+
+        ground = self.ground if ground is None else ground
+        plane = self._plane if ground is self.ground else np.append(*_plane(ground))
+        hypotheses = [list(h) for h in hypotheses]
+        self.n_evaluations += len(hypotheses)
+        lights = _pack_lights(hypotheses) if hypotheses else None
+        n_views = len(self.frames[0].target)
+        out = np.empty((len(hypotheses), len(self.frames), n_views))
+        for t, (f, pk) in enumerate(zip(self.frames, self._packed, strict=True)):
+            if pk is not None and lights is not None:
+                raw, ok = shadow_chamfer(*pk.mesh, lights, plane, self.matrices, pk.occ, pk.dmaps, *pk.obs,
+                                         f.target.tau_level)
+            else:
+                raw, ok = np.zeros((len(hypotheses), n_views, 3)), np.zeros((len(hypotheses), n_views), bool)
+            for i, k in zip(*np.nonzero(~ok), strict=True):  # the renderer's exact path
+                mask = shadow_silhouettes([self.cameras[k]], f.vertices, f.faces, hypotheses[i], ground,
+                                          normals=f.normals, topology=f.topology, occluders=[f.occluders[k]])[0]
+                raw[i, k] = _score_view(f.target, k, mask)
+            xi, counts = f.target.xi, np.asarray(f.target.counts, float)
+            with np.errstate(divide="ignore", invalid="ignore"):  # eq. 4.4's normalisation, 0 for an empty side
+                fwd = np.where(raw[..., 2] > 0, raw[..., 0] / raw[..., 2] ** xi, 0.0)
+                bwd = np.where(counts > 0, raw[..., 1] / counts ** xi, 0.0)
+            out[:, t] = (fwd + bwd) * f.target.unit_factor
+        return out
+
     def per_view(self, lights) -> np.ndarray:
         """(T, K) ``D(S^e_{k,t}, S^o_{k,t})`` per frame and view."""
-        self.n_evaluations += 1
-        return np.stack([silhouette_cost(f.target, predicted_shadows(f, self.cameras, lights, self.ground, self.matrices)).per_view
-                         for f in self.frames])
+        return self.terms([lights])[0]
 
     def __call__(self, lights) -> float:
         return float(self.per_view(lights).sum())
 
-    def many(self, hypotheses) -> np.ndarray:
-        """(N,) costs of a list of hypotheses (each a list of lights)."""
-        return np.array([self(h) for h in hypotheses])
+    def many(self, hypotheses, ground=None) -> np.ndarray:
+        """(N,) costs of a list of hypotheses (each a list of lights), cast on ``ground`` (default: the objective's)."""
+        return self.terms(hypotheses, ground).sum(axis=(1, 2))
+
+    def planes(self, lights, grounds) -> np.ndarray:
+        """(N,) costs of ``lights`` casting their shadows on each of ``grounds`` (the floor's refinement)."""
+        return np.array([self.many([lights], g)[0] for g in grounds])
 
     def empty_cost(self) -> float:
         """E with no predicted shadow at all: what a light casting nothing visible would score."""

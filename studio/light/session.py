@@ -3,7 +3,8 @@
 Bodies come from ``fit/NNNNNN.json`` (``bodies="fit"``, the thesis' procedure: bodies fitted
 from the silhouettes alone, eq. 5.8) or, for simulated sessions, from ``truth/bodies``
 (``"truth"``); shadows from the segmentation's label 2 (``shadows="segmentation"``) or the
-simulator's true labels (``"truth"``). The ground plane is the calibration's.
+simulator's true labels (``"truth"``). The ground plane is the calibration's, refined from the
+shadows on request (``refine_floor``; ``light.json`` then holds it under ``floor``).
 """
 
 from __future__ import annotations
@@ -95,7 +96,7 @@ def session_shadows(ws, frames: list[int], source: str = "segmentation") -> list
 
 def estimate_session_light(ws, *, frames: list[int] | None = None, kind: str = "auto", n_lights: int = 1,
                            bodies: str = "fit", shadows: str = "segmentation", workers: int = 1, seed: int = 0,
-                           n_steps: int = 40) -> dict:
+                           n_steps: int = 40, refine_floor: bool = False) -> dict:
     """Estimate the session's light(s) and write ``light/light.json``; returns what was written."""
     from rigs.atomic import atomic_write_json
 
@@ -112,7 +113,8 @@ def estimate_session_light(ws, *, frames: list[int] | None = None, kind: str = "
     frames, body_list = session_bodies(ws, frames, bodies)
     masks = session_shadows(ws, frames, shadows)
     est = estimate_light(body_list, ws.cameras, masks, frames=frames, kind=kind, n_lights=n_lights,
-                         ground=getattr(calib, "ground", None), workers=workers, seed=seed, n_steps=n_steps)
+                         ground=getattr(calib, "ground", None), workers=workers, seed=seed, n_steps=n_steps,
+                         refine_floor=refine_floor)
     out = est.to_json()
     out["sources"] = {"bodies": bodies, "shadows": shadows}
     atomic_write_json(ws.layout.light_json, out)

@@ -80,6 +80,44 @@ def test_fit_frame_reports_shadow_term_and_checks_masks(scene):
         ShadowTerm.build([], [labels[0] == 2], ["cam0"], (0,))
 
 
+def test_one_camera_is_fitted_with_a_light_and_flagged_without(scene):
+    """One camera and its shadow (thesis §5.5): the frame is fitted, no reason about the views;
+    the same camera without a light is fitted but flagged ``suspect``, the reason naming the view
+    (the tiny budget's fits are poor: other gates may flag them too); no usable view at all, or
+    a rig left with one view and no light, is still refused."""
+    from studio.fit import UnusableFrame
+    from studio.fit.init import feet_on_floor
+
+    model, cams, pose, labels = scene
+    tiny = FitOptions(levels=(2, 1, 1), n_particles=12, n_layers=2, nm_evaluations=6, final_evaluations=6,
+                      n_shape_free=0, partition_particles=0, partition_layers=0, limb_particles=0,
+                      rival_heading=False, find_support=False, start="stride")
+    sil, shadow = [labels[0] == 1], [labels[0] == 2]
+    assert np.linalg.norm(feet_on_floor(cams[0], sil[0]) - pose[:2]) < 0.25  # the monocular start
+    with pytest.raises(FitError, match=r"camera cam0: empty silhouette, no feet to put on the floor"):
+        feet_on_floor(cams[0], np.zeros_like(sil[0]))
+    from calibration import Camera
+
+    up = Camera.look_at("up", [0.0, 0.0, 0.5], [0.0, 0.1, 3.0], 170.0, (200, 150))
+    with pytest.raises(FitError, match=r"camera up: the feet's ray does not meet the floor"):
+        feet_on_floor(up, np.ones((150, 200), bool))
+    lit = fit_frame(model, cams[:1], sil, shape=model.mean_shape(), options=tiny, lights=[LIGHT],
+                    shadow_masks=shadow)
+    assert "views" not in {r["check"] for r in lit.quality["reasons"]} and "shadow" in lit.costs
+    dark = fit_frame(model, cams[:1], sil, shape=model.mean_shape(), options=tiny)
+    reasons = [r for r in dark.quality["reasons"] if r["check"] == "views"]
+    assert reasons[0]["severity"] == "suspect" and reasons[0]["view"] == "cam0" and dark.quality["status"] != "ok"
+    assert "one usable view (cam0) and no shadow term" in reasons[0]["message"]
+    with pytest.raises(UnusableFrame, match=r"0 usable view"):
+        fit_frame(model, cams[:1], [np.zeros_like(sil[0])], options=tiny, lights=[LIGHT], shadow_masks=shadow)
+    empty = [labels[0] == 1, np.zeros_like(sil[0])]  # two cameras, one view lost: a failed segmentation
+    with pytest.raises(UnusableFrame, match=r"1 usable view of 2: at least two are needed without a light"):
+        fit_frame(model, cams, empty, options=tiny)
+    lost = fit_frame(model, cams, empty, shape=model.mean_shape(), options=tiny, lights=[LIGHT],
+                     shadow_masks=[lab == 2 for lab in labels])
+    assert "shadow" in lost.costs  # ... fitted from the view left and its shadow
+
+
 def test_fit_session_with_shadows_needs_a_light(tmp_path):
     lightkit.make_session(tmp_path / "s", [LIGHT], n_frames=2)
     with pytest.raises(FitError, match=r"no light estimated — run `studio light` first"):

@@ -115,7 +115,7 @@ def _light(ws, frames, workers: int) -> str:
     from studio.light import LightError, estimate_session_light
 
     try:
-        out = estimate_session_light(ws, frames=frames, kind="point", workers=min(workers, 2))
+        out = estimate_session_light(ws, frames=frames, kind="point", workers=1)
     except LightError as exc:
         return f"light: not estimated ({exc})"
     return (f"light: point light at {[round(v, 2) for v in out['position']]} m, direction ±"

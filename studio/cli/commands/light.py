@@ -27,7 +27,12 @@ def register(subparsers) -> None:
                    help="bodies casting the shadows: fitted (fit/) or, for a simulated session, the truth")  # fmt: skip
     p.add_argument("--shadows", default="segmentation", choices=["segmentation", "truth"],
                    help="observed shadows: the segmentation's label 2 or, for a simulated session, the true labels")  # fmt: skip
-    p.add_argument("--workers", type=int, default=2, help="processes scoring the hypotheses (default: %(default)s)")
+    p.add_argument("--workers", type=int, default=1,
+                   help="processes scoring the hypotheses (default: %(default)s; the compiled objective scores 10 "
+                        "frames in a few CPU seconds, less than starting more processes costs)")  # fmt: skip
+    p.add_argument("--refine-floor", action="store_true",
+                   help="also refine the ground plane from the shadows (tilt and height about the calibration's; "
+                        "recorded in light.json under 'floor', used by `studio fit --shadows`)")  # fmt: skip
     p.add_argument("--steps", type=int, default=40, help="MCMC steps per walker (default: %(default)s)")
     p.add_argument("--seed", type=int, default=0, help="random seed of the sampler (default: %(default)s)")
     p.add_argument("--out", type=Path, default=None,
@@ -49,7 +54,8 @@ def run(args) -> int:
     frames = select_frames(args.frames, ws.frame_indices)
     try:
         out = estimate_session_light(ws, frames=frames, kind=args.kind, n_lights=args.lights, bodies=args.bodies,
-                                     shadows=args.shadows, workers=args.workers, seed=args.seed, n_steps=args.steps)
+                                     shadows=args.shadows, workers=args.workers, seed=args.seed, n_steps=args.steps,
+                                     refine_floor=args.refine_floor)
     except (LightError, WorkspaceError) as exc:
         raise CommandError(str(exc)) from None
     for i, light in enumerate(out["lights"]):
@@ -57,6 +63,10 @@ def run(args) -> int:
                  f"(95% CI {light['distance_ci'][0]:+.1f}% .. {light['distance_ci'][1]:+.1f}%)"
                  if light["kind"] == "point" else f"towards {[round(v, 4) for v in light['direction']]}")
         print(f"light {i + 1}: {light['kind']} {where}, direction ±{light['direction_ci_deg']:.2f}° (95%)")
+    if "floor" in out:
+        fl = out["floor"]
+        print(f"floor: tilted {fl['tilt_deg']:.2f}° from the calibration's, {1000 * fl['height_at_centre_m']:+.1f} mm "
+              "at the subject")
     s = out["samples_summary"]
     print(f"frames {out['frames']}; {out['n_evaluations']} evaluations, effective sample size {s['effective_sample_size']:.0f}, "
           f"{out['timings']['total']:.1f} s; written {ws.layout.light_json}")

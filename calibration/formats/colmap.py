@@ -166,6 +166,9 @@ def read_colmap(path: str | PathLike):
         else:
             try:
                 doc = json.loads(sidecar.read_text())
+                if not isinstance(doc, dict):
+                    raise CalibrationError(f"bad sidecar (expected a JSON object, got {type(doc).__name__})",
+                                           field="ground")
                 if str(doc.get("version", 1)).split(".")[0] != "1":
                     raise CalibrationError(
                         f"unknown major version {doc['version']!r} (this reader knows 1)",

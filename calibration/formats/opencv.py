@@ -107,8 +107,15 @@ def _open(path: Path):
     if not path.is_file():
         raise CalibrationError("no such file", file=path)
     _check_text(path)
+    return open_storage(str(path), cv2.FILE_STORAGE_READ, path)
+
+
+def open_storage(source: str, flags: int, path: Path):
+    """``cv2.FileStorage(source, flags)``, opened, or an error naming ``path`` with OpenCV's reason."""
+    import cv2
+
     try:
-        fs = cv2.FileStorage(str(path), cv2.FILE_STORAGE_READ)
+        fs = cv2.FileStorage(source, flags)
         opened = fs.isOpened()
     except (cv2.error, SystemError) as exc:  # the binding may wrap cv2.error in SystemError
         opened, reason = False, str(getattr(exc, "err", None) or exc.__cause__ or exc)

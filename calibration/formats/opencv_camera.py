@@ -38,7 +38,7 @@ import numpy as np
 from calibration.camera import Camera
 from calibration.errors import CalibrationError
 from calibration.formats import RigParts
-from calibration.formats.opencv import _check_text, _mat, _open
+from calibration.formats.opencv import _check_text, _mat, _open, open_storage
 from calibration.ground import GroundPlane
 from calibration.rotation import nearest_rotation, rotvec_to_matrix
 from rigs.atomic import atomic_path
@@ -106,10 +106,7 @@ def _open_storage(path: Path):
     if not text.lstrip().startswith("<opencv_storage"):
         return _open(path)
     _check_text(path)
-    fs = cv2.FileStorage('<?xml version="1.0"?>\n' + text, cv2.FILE_STORAGE_READ | cv2.FILE_STORAGE_MEMORY)
-    if not fs.isOpened():
-        raise CalibrationError("not an OpenCV FileStorage file", file=path)
-    return fs
+    return open_storage('<?xml version="1.0"?>\n' + text, cv2.FILE_STORAGE_READ | cv2.FILE_STORAGE_MEMORY, path)
 
 
 def read_camera_file(path: Path, name: str) -> tuple[Camera, list[str], bool]:

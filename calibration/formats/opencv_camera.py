@@ -38,7 +38,7 @@ import numpy as np
 from calibration.camera import Camera
 from calibration.errors import CalibrationError
 from calibration.formats import RigParts
-from calibration.formats.opencv import _check_text, _mat, _open, open_storage
+from calibration.formats.opencv import _check_text, _mat, _open, open_storage, size_from_principal_point
 from calibration.ground import GroundPlane
 from calibration.rotation import nearest_rotation, rotvec_to_matrix
 from rigs.atomic import atomic_path
@@ -143,10 +143,7 @@ def read_camera_file(path: Path, name: str) -> tuple[Camera, list[str], bool]:
                 size = found[0]
                 notes.append(f"camera {name!r}: image size {size[0]}x{size[1]} from {found[1]} beside the file")
             else:
-                if K.shape != (3, 3):
-                    raise CalibrationError(f"expected shape (3, 3), got {K.shape}", file=path, camera=name,
-                                           field=layout[0])
-                size = (int(round(2 * K[0, 2] + 1)), int(round(2 * K[1, 2] + 1)))
+                size = size_from_principal_point(K, path, name, layout[0])
                 notes.append(f"warning: camera {name!r}: no image size in the file and no video or image beside "
                              f"it: guessed {size[0]}x{size[1]} from the principal point (2 c + 1)")
         try:

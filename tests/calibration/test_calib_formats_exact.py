@@ -113,6 +113,10 @@ def test_multical_without_poses_is_intrinsics_only(tmp_path):
 
 @pytest.mark.parametrize("poses, detail, field", [
     ({"cam1": None}, "expected {R: 3x3, T: [3]}", "camera_poses.cam1"),
+    ({"cam1": {"R": np.eye(3).tolist()}}, "expected {R: 3x3, T: [3]}", "camera_poses.cam1"),
+    ({"cam1": {"T": [0, 0, 1]}}, "expected {R: 3x3, T: [3]}", "camera_poses.cam1"),
+    ({"cam1": {"R": np.eye(3).tolist(), "T": ["a", 0, 1]}},
+     "not numeric (could not convert string to float: 'a')", "camera_poses.cam1"),
     ({"cam1": {"R": [["a", 0, 0], [0, 1, 0], [0, 0, 1]], "T": [0, 0, 1]}},
      "not numeric (could not convert string to float: 'a')", "camera_poses.cam1"),
     ({"cam1": {"R": np.eye(3).tolist(), "T": [0, float("nan"), 1]}},
@@ -176,6 +180,12 @@ def test_multical_writer_document(tmp_path):
         "camera_poses": {"a": {"R": R.tolist(), "T": [0.1, 0.2, 2.0]},
                          "b": {"R": np.eye(3).tolist(), "T": [0.0, 0.0, 1.0]}}}
     assert path.read_text().startswith('{\n  "cameras": {\n    "a": {\n')  # indented, one key a line
+    models = {}
+    for n in (4, 5, 8, 12, 14):
+        cam = Camera("c", K, [0.01] * n, np.eye(3), [0, 0, 1], (1280, 720))
+        RigCalibration([cam]).write(tmp_path / "n.json", "multical")
+        models[n] = json.loads((tmp_path / "n.json").read_text())["cameras"]["c"]["model"]
+    assert models == {4: "standard", 5: "standard", 8: "rational", 12: "thin_prism", 14: "tilted"}
     fish = Camera("f", K, [0.01, 0.0, 0.0, 0.0], np.eye(3), [0, 0, 1], (1280, 720), "fisheye")
     assert_error(raised(RigCalibration([fish]).write, tmp_path / "f.json", "multical"),
                  "multical has no fisheye model", camera="f", field="model", file=tmp_path / "f.json")

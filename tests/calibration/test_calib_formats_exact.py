@@ -49,7 +49,15 @@ def assert_error(exc: CalibrationError, detail: str, *, camera=None, field=None,
         assert exc.file == str(file)
 
 
+def _numpy_reason(values) -> str:
+    with pytest.raises(ValueError) as info:
+        np.asarray(values, dtype=np.float64)
+    return str(info.value)
+
+
 # ------------------------------------------------------------------------------------------ multical
+#: a ragged distortion table: NumPy's own message, as the camera quotes it
+RAGGED = f"not numeric ({_numpy_reason([[0.1, 0.2], [0.3]])})"
 def _multical_doc(poses: dict, names=("cam1", "cam2", "cam3")) -> dict:
     return {"cameras": {n: {"model": "standard", "image_size": [1280, 720], "K": K,
                             "dist": [[-0.1, 0.02, 0.001, -0.002, 0.003]]} for n in names},
@@ -82,21 +90,38 @@ def test_multical_links_resolve_backwards_and_over_several_passes(tmp_path):
     assert (parts.units, parts.units_fixed, parts.metadata) == ("m", False, {"source": "multical"})
 
 
+def test_multical_link_resolved_forward_opens_a_backward_one(tmp_path):
+    """``cam2_to_cam3`` comes first but needs cam2, which ``cam2_to_cam1`` poses only later
+    in the same pass (forward): a second pass then inverts the first link for cam3."""
+    T1 = homogeneous(Rotation.from_rotvec([0.1, -0.2, 0.05]).as_matrix(), [0.1, -0.3, 2.0])
+    T21 = homogeneous(Rotation.from_rotvec([0.0, 0.3, 0.02]).as_matrix(), [-0.5, 0.04, 0.05])  # cam1 → cam2
+    T23 = homogeneous(Rotation.from_rotvec([0.02, 0.25, -0.01]).as_matrix(), [-0.45, 0.01, 0.2])  # cam3 → cam2
+    poses = {"cam2_to_cam3": _entry(T23[:3, :3], T23[:3, 3]), "cam2_to_cam1": _entry(T21[:3, :3], T21[:3, 3]),
+             "cam1": _entry(T1[:3, :3], T1[:3, 3])}
+    path = tmp_path / "calibration.json"
+    path.write_text(json.dumps(_multical_doc(poses)))
+    parts = reader("multical")(path)
+    T3 = np.linalg.inv(T23) @ T21 @ T1
+    np.testing.assert_allclose(parts.cameras["cam3"].R, T3[:3, :3], rtol=0, atol=1e-12)
+    np.testing.assert_allclose(parts.cameras["cam3"].t, T3[:3, 3], rtol=0, atol=1e-12)
+
+
 def test_multical_rounded_rotation_is_reorthonormalised_and_noted(tmp_path):
     """A rotation written with 5 decimals (off by ~1e-5, within the 1e-4 allowed to rounding)
     is replaced by its nearest rotation (SVD here); T written as a 3x1 column is accepted."""
     R = Rotation.from_rotvec([0.3, -1.2, 0.5]).as_matrix()
     rounded = np.round(R, 5)
     assert 1e-6 < np.max(np.abs(rounded @ rounded.T - np.eye(3))) < 1e-4
-    poses = {"cam1": {"R": rounded.tolist(), "T": [[0.1], [-0.3], [2.0]]}}
+    poses = {"cam1": {"R": rounded.tolist(), "T": [[0.1], [-0.3], [2.0]]},
+             "cam2": {"R": rounded.tolist(), "T": [0.1, -0.3, 2.0]}}
     path = tmp_path / "calibration.json"
-    path.write_text(json.dumps(_multical_doc(poses, names=("cam1",))))
+    path.write_text(json.dumps(_multical_doc(poses, names=("cam1", "cam2"))))
     parts = reader("multical")(path)
     np.testing.assert_allclose(parts.cameras["cam1"].R, svd_rotation(rounded), rtol=0, atol=1e-14)
     np.testing.assert_array_equal(parts.cameras["cam1"].t, [0.1, -0.3, 2.0])
     np.testing.assert_array_equal(parts.cameras["cam1"].dist, [-0.1, 0.02, 0.001, -0.002, 0.003])
     assert parts.notes == ("multical: poses map world (or the named camera) to camera",
-                           "pose rotations of cam1 re-orthonormalised (written with few decimals)")
+                           "pose rotations of cam1, cam2 re-orthonormalised (written with few decimals)")
 
 
 def test_multical_without_poses_is_intrinsics_only(tmp_path):
@@ -132,12 +157,24 @@ def test_multical_without_poses_is_intrinsics_only(tmp_path):
     ({"camY_to_cam1": _entry(np.eye(3), [0, 0, 1])}, "names camera 'camY', which 'cameras' does not hold",
      "camera_poses.camY_to_cam1"),
     ({"camZ": _entry(np.eye(3), [0, 0, 1])}, "camera 'camZ' is not in 'cameras'", "camera_poses.camZ"),
+    ({"cam1_to_cam2_to_x": _entry(np.eye(3), [0, 0, 1])}, "names camera 'cam2_to_x', which 'cameras' does not hold",
+     "camera_poses.cam1_to_cam2_to_x"),
     ([1, 2], "expected an object", "camera_poses"),
 ])
 def test_multical_bad_poses_name_the_entry(tmp_path, poses, detail, field):
     path = tmp_path / "calibration.json"
     path.write_text(json.dumps(_multical_doc(poses, names=("cam1", "cam2"))))
     assert_error(raised(reader("multical"), path), detail, field=field, file=path)
+
+
+def test_multical_bad_documents(tmp_path):
+    path = tmp_path / "calibration.json"
+    path.write_text("[1, 2]")
+    assert_error(raised(reader("multical"), path), "expected an object with a non-empty 'cameras' table",
+                 field="cameras", file=path)
+    path.write_text('{"cameras": {"a": 1},}')
+    exc = raised(reader("multical"), path)
+    assert exc.detail.startswith("not valid JSON (") and exc.field is None and exc.file == str(path)
 
 
 @pytest.mark.parametrize("change, detail, camera, field", [
@@ -154,6 +191,11 @@ def test_multical_bad_poses_name_the_entry(tmp_path, poses, detail, field):
     (lambda d: d["camera_poses"].pop("cam2"),
      "no pose reaches camera(s) cam2: expected an absolute entry or a chain of <a>_to_<b> entries", None,
      "camera_poses"),
+    (lambda d: d.update(cameras={**d["cameras"], "cam3": d["cameras"]["cam1"], "cam4": d["cameras"]["cam1"]}),
+     "no pose reaches camera(s) cam3, cam4: expected an absolute entry or a chain of <a>_to_<b> entries", None,
+     "camera_poses"),
+    (lambda d: d["cameras"]["cam1"].update(K=[[1, 0], [0, 1]]), "expected shape (3, 3), got (2, 2)", "cam1", "K"),
+    (lambda d: d["cameras"]["cam1"].update(dist=[[0.1, 0.2], [0.3]]), RAGGED, "cam1", "dist"),
 ])
 def test_multical_bad_cameras_name_camera_and_field(tmp_path, change, detail, camera, field):
     doc = _multical_doc({"cam1": _entry(np.eye(3), [0, 0, 1]), "cam2": _entry(np.eye(3), [1, 0, 1])},
@@ -573,7 +615,7 @@ def _qca_camera(serial="1", cam_id=None, active="1", residual="0.4", drop=(), sk
     left, right, top, bottom = fov
     elems = {
         "fov_video": {"left": left, "right": right, "top": top, "bottom": bottom},
-        "intrinsic": {"sensorMinU": 0, "sensorMaxU": 64 * 2047, "sensorMinV": 64 * 8, "sensorMaxV": 64 * 1095,
+        "intrinsic": {"sensorMinU": 64 * 4, "sensorMaxU": 64 * 2051, "sensorMinV": 64 * 8, "sensorMaxV": 64 * 1095,
                       "focalLengthU": 64 * 1800, "focalLengthV": 64 * 1802, "centerPointU": 64 * 1000,
                       "centerPointV": 64 * 560, "skew": skew, "radialDistortion1": "-0.05",
                       "radialDistortion2": "0.14", "radialDistortion3": k3, "tangentalDistortion1": "0.0006",

@@ -9,6 +9,8 @@ Cameras look straight down (``R = diag(1, -1, -1)``) or up, so a centre ``C`` gi
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 import pytest
 
@@ -158,7 +160,7 @@ def test_z_down_world_flipped_refused_or_kept():
     np.testing.assert_array_equal(out.cameras["a"].t, p.cameras["a"].t)
     np.testing.assert_allclose(out.cameras["b"].center, [-1, -0.5, 2.5], rtol=0, atol=1e-15)
     np.testing.assert_array_equal(out.ground.normal, [0.0, 0.0, 1.0])
-    assert out.ground.offset == 0.0
+    assert out.ground.offset == 0.0 and math.copysign(1.0, out.ground.offset) == 1.0  # not -0.0 in files written
     exc = pytest.raises(CalibrationError, settle, p, z_down="refuse", source="down.toml").value
     assert (exc.detail, exc.file, exc.field) == (
         "the world's Z axis points down (all cameras 2.00 to 2.50 m below the floor z = 0 along +Z): expected world "
@@ -244,3 +246,13 @@ def test_facing_warning_when_fewer_than_half_look_at_the_others(n_facing, n, war
                "camera x axis as older Pose2Sim versions wrote")
     assert (notes[-1] == warning) is warned
     assert len(notes) == 2 + warned
+
+
+def test_cameras_all_at_one_point_carry_no_pose_information():
+    """Two cameras at the same centre (not the origin): spread 0, so no units, no up axis."""
+    p = parts_of(cam("a", [1, 2, 3]), cam("b", [1, 2, 3]), units="mm", units_fixed=False)
+    assert camera_spread(p.cameras) == 0.0
+    assert up_status(p.cameras, p.ground)[0] == "none"
+    assert settle(p).notes == ("units: not applicable (no camera pose in the file)",
+                               "up axis: not applicable (no camera pose)")
+    np.testing.assert_allclose(settle(p).cameras["a"].center, [0.001, 0.002, 0.003], rtol=0, atol=1e-18)

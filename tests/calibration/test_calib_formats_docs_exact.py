@@ -478,3 +478,15 @@ def test_read_pairs_settles_and_names_the_first_file(tmp_path):
                  "the world's Z axis points down (all cameras 2000.00 m below the floor z = 0 along +Z): expected "
                  "world Z up; pass z_down='flip' (--z-down flip) to turn the world half a turn about X",
                  field="up axis", file=first)
+
+
+def test_detection_reads_the_first_4096_bytes(tmp_path):
+    """Content sniffing looks at the head of the file only (4 KiB): a marker ending at byte
+    4096 counts, one ending at byte 4097 does not."""
+    marker = '"camera_poses"'
+    for end, expected in ((4096, "multical"), (4097, "native")):
+        pad = "x" * (end - len('{"a": "') - len('", ') - len(marker))
+        text = '{"a": "' + pad + '", ' + marker + ": {}}"
+        assert text.index(marker) + len(marker) == end
+        (tmp_path / "c.json").write_text(text)
+        assert detect_format(tmp_path / "c.json") == expected

@@ -490,3 +490,21 @@ def test_detection_reads_the_first_4096_bytes(tmp_path):
         assert text.index(marker) + len(marker) == end
         (tmp_path / "c.json").write_text(text)
         assert detect_format(tmp_path / "c.json") == expected
+
+
+
+def test_caliscope_rounding_tolerances_at_their_bounds(tmp_path):
+    """A legacy 3x3 rotation off by exactly 1e-4 (the largest put down to rounding) is taken
+    as its nearest rotation; off by exactly 1e-6 it is kept as written."""
+    path = tmp_path / "camera_array.toml"
+    for e, keep in ((1e-4, False), (1e-6, True)):
+        M = np.eye(3)
+        M[0, 1] = e
+        assert np.max(np.abs(M @ M.T - np.eye(3))) == e
+        path.write_text(tomli_w.dumps({"cameras": {"0": _cs_table(rotation=M.tolist())}}))
+        R = reader("caliscope")(path).cameras["0"].R
+        if keep:
+            np.testing.assert_array_equal(R, M)
+        else:
+            U, _, Vt = np.linalg.svd(M)
+            np.testing.assert_allclose(R, U @ Vt, rtol=0, atol=1e-15)

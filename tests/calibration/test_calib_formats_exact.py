@@ -688,3 +688,42 @@ def test_qualisys_invalid_xml_names_the_format(tmp_path):
     path.write_text("<calibration><cameras></calibration>")
     assert_error(raised(reader("qualisys"), path), "not valid Qualisys XML (mismatched tag: line 1, column 24)",
                  file=path)
+
+
+# ------------------------------------------------------------------------------------------ rounding bounds
+def sheared(e: float) -> np.ndarray:
+    """A rotation part off by exactly ``e`` = max |M Mᵀ - I| (the off-diagonal product e·1)."""
+    M = np.eye(3)
+    M[0, 1] = e
+    assert np.max(np.abs(M @ M.T - np.eye(3))) == e
+    return M
+
+
+@pytest.mark.parametrize("fmt", ["multical", "kalibr", "optitrack"])
+def test_rounding_tolerances_at_their_bounds(tmp_path, fmt):
+    """ROUNDING_TOL (1e-4) is the largest error put down to rounding: at exactly 1e-4 the
+    nearest rotation (SVD here) is taken; up to 1e-6 the matrix is a rotation as written."""
+
+    def load(M):
+        if fmt == "multical":
+            path = tmp_path / "calibration.json"
+            path.write_text(json.dumps(_multical_doc({"cam1": _entry(M, [0, 0, 1])}, names=("cam1",))))
+            return reader(fmt)(path).cameras["cam1"].R
+        if fmt == "kalibr":
+            path = tmp_path / "camchain.yaml"
+            path.write_text(yaml.safe_dump({"cam0": _kalibr_cam(), "cam1": _kalibr_cam(T_cn_cnm1=homogeneous(
+                M, [0.1, 0, 0]).tolist())}))
+            return reader(fmt)(path).cameras["cam1"].R
+        path = tmp_path / "lab.mcal"
+        path.write_text(_mcal(_mcal_camera(orient=M)))
+        turn = np.array([[1.0, 0, 0], [0, 0, -1], [0, 1, 0]])
+        return np.diag([1.0, -1.0, -1.0]).T @ reader(fmt)(path).cameras["M1"].R @ turn  # back to OrientMatrixᵀ
+
+    at_bound = load(sheared(1e-4))
+    expected = svd_rotation(sheared(1e-4))
+    np.testing.assert_allclose(at_bound, expected.T if fmt == "optitrack" else expected, rtol=0, atol=1e-15)
+    exact = load(sheared(1e-6))
+    if fmt == "optitrack":  # the reader always takes the nearest rotation of OrientMatrix
+        np.testing.assert_allclose(exact, svd_rotation(sheared(1e-6)).T, rtol=0, atol=1e-15)
+    else:
+        np.testing.assert_array_equal(exact, sheared(1e-6))

@@ -252,3 +252,21 @@ def test_writer_document_read_with_filestorage(tmp_path):
         assert_error(raised(one.write, tmp_path / "x", "opencv"),
                      "camera names must be plain words to form FileStorage keys like K_<name>", camera=bad,
                      field="name", file=tmp_path / "x" / "intri.yml")
+
+
+
+def test_rotation_tolerances_at_their_bounds(tmp_path):
+    """Rot_ alone off by exactly ROUNDING_TOL (1e-4): the nearest rotation (SVD here), with the
+    rounding note; off by exactly EXACT_TOL (1e-6): kept as written, no note."""
+    for e, note in ((1e-4, True), (1e-6, False)):
+        M = np.eye(3)
+        M[0, 1] = e
+        assert np.max(np.abs(M @ M.T - np.eye(3))) == e
+        parts = read(tmp_path, doc(intri()), doc(extri(rvec=None, rot=M)))
+        U, _, Vt = np.linalg.svd(M)
+        if note:
+            np.testing.assert_allclose(parts.cameras["c1"].R, U @ Vt, rtol=0, atol=1e-15)
+            assert parts.notes[1].startswith("rotations of c1 written with few decimals")
+        else:
+            np.testing.assert_array_equal(parts.cameras["c1"].R, M)
+            assert parts.notes == ("units: EasyMocap's documentation asks for metres",)

@@ -290,3 +290,24 @@ def test_writer_layout_read_back_with_elementtree(tmp_path):
     fish = cams[0].replace(model="fisheye", dist=np.array([0.01, 0.0, 0.0, 0.0]))
     assert_error(raised(RigCalibration([fish]).write, out, "opencv_camera"),
                  "the per-camera OpenCV layout has no fisheye model", camera="left", field="model", file=out)
+
+
+
+def test_rotation_tolerances_at_their_bounds(tmp_path):
+    """A 3x3 Rotation off by exactly ROUNDING_TOL (1e-4): re-orthonormalised (SVD here) and
+    noted; off by exactly 1e-6: kept as written."""
+    path = tmp_path / "config.xml"
+    for e, rounded in ((1e-4, True), (1e-6, False)):
+        M = np.eye(3)
+        M[0, 1] = e
+        assert np.max(np.abs(M @ M.T - np.eye(3))) == e
+        path.write_text(_course(rvec=M, rshape=(3, 3), extra=("<image_width>640</image_width>",
+                                                              "<image_height>480</image_height>")))
+        cam, notes, _ = read_camera_file(path, "c")
+        if rounded:
+            U, _, Vt = np.linalg.svd(M)
+            np.testing.assert_allclose(cam.R, U @ Vt, rtol=0, atol=1e-15)
+            assert notes == ["camera 'c': Rotation re-orthonormalised (written with few decimals)"]
+        else:
+            np.testing.assert_array_equal(cam.R, M)
+            assert notes == []

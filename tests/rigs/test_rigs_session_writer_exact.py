@@ -56,10 +56,11 @@ def test_created_session_json_and_csv_header(tmp_path):
                                                  "cam1.timestamp_ns,cam1.frame_id,cam1.flag\n")
     assert sorted(p.name for p in (path / "frames").iterdir()) == CAMS
     assert sorted(p.name for p in (path / "background").iterdir()) == CAMS
-    assert w.path == path and w.cameras == CAMS and w.frame_count == 0 and not w.closed
+    assert w.path == path and w.cameras == CAMS and w.frame_count == 0 and w.closed is False
     assert w.info == {**info, "start_time": start}
     assert repr(w) == f"SessionWriter({str(path)!r}, cameras=['cam0', 'cam1'], frames=0, open)"
     w.close()
+    assert w.closed is True
     assert repr(w) == f"SessionWriter({str(path)!r}, cameras=['cam0', 'cam1'], frames=0, closed)"
     plain = SessionWriter.create(tmp_path / "p", ["a"])
     info = json.loads((tmp_path / "p" / "session.json").read_text())
@@ -192,7 +193,7 @@ def test_compression_and_fsync_reach_every_write(tmp_path, monkeypatch):
                          ("json", "session.json", None, sync), ("json", "session.json", None, True)]
 
 
-@pytest.mark.parametrize("workers, pooled, most", [(1, False, 1), (2, True, 2), (3, True, 3)])
+@pytest.mark.parametrize("workers, pooled, most", [(None, False, 1), (1, False, 1), (2, True, 2), (3, True, 3)])
 def test_workers_write_a_frame_on_that_many_threads(tmp_path, monkeypatch, workers, pooled, most):
     """workers = 1 writes in the calling thread; more, on a pool of that many threads named
     session-writer (each write held 50 ms so that they overlap)."""
@@ -212,7 +213,7 @@ def test_workers_write_a_frame_on_that_many_threads(tmp_path, monkeypatch, worke
 
     monkeypatch.setattr(imageio, "write_image", slow)
     cams = ["a", "b", "c", "d"]
-    w = SessionWriter.create(tmp_path / "s", cams, workers=workers)
+    w = SessionWriter.create(tmp_path / "s", cams, **({} if workers is None else {"workers": workers}))
     w.write_frame(0, {c: img(1) for c in cams})
     w.close()
     if pooled:

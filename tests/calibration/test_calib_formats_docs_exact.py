@@ -423,6 +423,8 @@ def test_detect_format_of_utf16_and_folders(tmp_path):
     assert_error(raised(detect_format, tmp_path / "p.xml", for_writing=True),
                  "per-camera OpenCV files are written as a folder of <camera>/config.xml: give a folder name and the "
                  "format opencv_camera", file=tmp_path / "p.xml")
+    (tmp_path / "k.dat").write_text('<Camera DEVICEID="1"><KeyFrames/></Camera>')  # no <Cameras: not Vicon
+    assert_error(raised(detect_format, tmp_path / "k.dat"), unknown, file=tmp_path / "k.dat")
     (tmp_path / "p.dat").write_text("<root/>")
     assert_error(raised(detect_format, tmp_path / "p.dat"), unknown, file=tmp_path / "p.dat")
     assert_error(raised(detect_format, tmp_path / "q.dat", for_writing=True), unknown, file=tmp_path / "q.dat")

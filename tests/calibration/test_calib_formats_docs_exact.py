@@ -510,3 +510,35 @@ def test_caliscope_rounding_tolerances_at_their_bounds(tmp_path):
         else:
             U, _, Vt = np.linalg.svd(M)
             np.testing.assert_allclose(R, U @ Vt, rtol=0, atol=1e-15)
+
+
+def test_detection_details(tmp_path):
+    """A UTF-16 head cut in the middle of a character still sniffs; a Caliscope table after a
+    comment line is found (line-anchored search); rig_from_dict names '<dict>' by default."""
+    from calibration.formats.native import rig_from_dict
+
+    (tmp_path / "a.x").write_bytes(b"\xff\xfe" + "<calibrationProfile/>".encode("utf-16-le") + b"\x00")
+    assert detect_format(tmp_path / "a.x") == "optitrack"
+    (tmp_path / "c.toml").write_text("# Caliscope camera array\n[cameras.0]\nport = 0\n")
+    assert detect_format(tmp_path / "c.toml") == "caliscope"
+    assert_error(raised(rig_from_dict, {"format": "x"}), "expected 'studio.rig-calibration', got 'x'",
+                 field="format", file="<dict>")
+
+
+def test_toml_reader_and_writer_details(tmp_path):
+    """[metadata] first does not end the camera tables; a fisheye camera with a 3x3 rotation
+    stays fisheye and a bad size under it names the camera; the default metadata written."""
+    R = Rotation.from_rotvec([0.1, -0.2, 0.3]).as_matrix()
+    path = tmp_path / "Calib.toml"
+    path.write_text(tomli_w.dumps({"metadata": {"adjusted": True},
+                                   "cam_0": _toml_cam(rotation=R.tolist(), fisheye=True,
+                                                      distortions=[0.01, 0.0, 0.0, 0.0])}))
+    parts = reader("toml")(path)
+    assert list(parts.cameras) == ["A"] and parts.cameras["A"].model == "fisheye"
+    path.write_text(tomli_w.dumps({"cam_0": _toml_cam(rotation=R.tolist(), size=[640])}))
+    assert_error(raised(reader("toml"), path), "expected [width, height], got [640]", camera="A", field="size",
+                 file=path)
+    cam = Camera("A", K, [], np.eye(3), [0.0, 0.0, 3.0], (640, 480))
+    RigCalibration([cam]).write(path, "toml")
+    assert tomllib.loads(path.read_text())["metadata"] == {
+        "adjusted": False, "error": 0.0, "studio_ground": {"normal": [0.0, 0.0, 1.0], "offset": 0.0}}

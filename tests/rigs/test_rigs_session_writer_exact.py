@@ -340,3 +340,18 @@ def test_nested_folder_created_and_life_cycle_logged(tmp_path, caplog):
     assert [r.getMessage() for r in caplog.records if r.name == "rigs.session.writer"] == [
         f"created capture session {path} (cameras cam0, cam1)", f"closed capture session {path}: 2 frames, complete"]
     assert json.loads((path / "session.json").read_text())["status"] == "complete"
+
+
+def test_parallel_writes_get_the_level_and_fsync(tmp_path, monkeypatch):
+    calls = []
+    real = imageio.write_image
+
+    def write_image(path, array, compression=1, *, fsync=False):
+        calls.append((compression, fsync))
+        return real(path, array, compression, fsync=fsync)
+
+    monkeypatch.setattr(imageio, "write_image", write_image)
+    w = SessionWriter.create(tmp_path / "s", CAMS, durability="fsync", compression=6, workers=2)
+    w.write_frame(0, {"cam0": img(1), "cam1": img(1)})
+    w.close()
+    assert calls == [(6, True), (6, True)]

@@ -542,3 +542,16 @@ def test_toml_reader_and_writer_details(tmp_path):
     RigCalibration([cam]).write(path, "toml")
     assert tomllib.loads(path.read_text())["metadata"] == {
         "adjusted": False, "error": 0.0, "studio_ground": {"normal": [0.0, 0.0, 1.0], "offset": 0.0}}
+
+
+
+def test_easymocap_pair_of_any_name_given_the_format(tmp_path):
+    """With the format given, either file of a pair names the other by swapping intri/extri,
+    whatever the suffix (here .txt, which no name-based rule knows)."""
+    cam = Camera("c1", K, [], R1, [0.1, 0.2, 3.0], (1280, 720))
+    i, e = RigCalibration([cam]).write(tmp_path / "intri.yml", "opencv"), tmp_path / "extri.yml"
+    (tmp_path / "intri.txt").write_bytes(i.read_bytes())
+    (tmp_path / "extri.txt").write_bytes(e.read_bytes())
+    for name in ("intri.txt", "extri.txt"):
+        parts = read(tmp_path / name, "opencv", z_down="keep")
+        np.testing.assert_array_equal(parts.cameras["c1"].R, R1)

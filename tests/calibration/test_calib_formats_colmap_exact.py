@@ -13,22 +13,12 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
-from calibration import Camera, CalibrationError, GroundPlane, RigCalibration
+from calibration import Camera, GroundPlane, RigCalibration
 from calibration.formats import reader
+from formatkit import assert_error, raised
 
 K = [[900.0, 0.0, 640.0], [0.0, 905.0, 360.0], [0.0, 0.0, 1.0]]
 R1 = Rotation.from_rotvec([0.2, -0.1, 0.3]).as_matrix()
-
-
-def raised(fn, *args, **kwargs) -> CalibrationError:
-    with pytest.raises(CalibrationError) as info:
-        fn(*args, **kwargs)
-    return info.value
-
-
-def assert_error(exc, detail, *, camera=None, field=None, file=None):
-    assert (exc.detail, exc.camera, exc.field) == (detail, camera, field)
-    assert exc.file == (None if file is None else str(file))
 
 
 def _wxyz(R) -> str:

@@ -14,18 +14,13 @@ import pytest
 import tomli_w
 from scipy.spatial.transform import Rotation
 
-from calibration import Camera, CalibrationError, GroundPlane, RigCalibration
+from calibration import Camera, GroundPlane, RigCalibration
 from calibration.formats import reader
 from calibration.formats.text import attr_float, child, parse_xml, read_document
+from formatkit import assert_error, raised
 
 K = [[900.0, 0.0, 640.0], [0.0, 905.0, 360.0], [0.0, 0.0, 1.0]]
 R1 = Rotation.from_rotvec([0.2, -0.1, 0.3]).as_matrix()
-
-
-def raised(fn, *args, **kwargs) -> CalibrationError:
-    with pytest.raises(CalibrationError) as info:
-        fn(*args, **kwargs)
-    return info.value
 
 
 def reason(parse, text) -> str:
@@ -33,11 +28,6 @@ def reason(parse, text) -> str:
     with pytest.raises(Exception) as info:
         parse(text)
     return str(info.value).replace("\n", " ")
-
-
-def assert_error(exc, detail, *, camera=None, field=None, file=None):
-    assert (exc.detail, exc.camera, exc.field) == (detail, camera, field)
-    assert exc.file == (None if file is None else str(file))
 
 
 # ------------------------------------------------------------------------------------------ text
@@ -494,7 +484,6 @@ def test_detection_reads_the_first_4096_bytes(tmp_path):
         assert detect_format(tmp_path / "c.json") == expected
 
 
-
 def test_caliscope_rounding_tolerances_at_their_bounds(tmp_path):
     """A legacy 3x3 rotation off by exactly 1e-4 (the largest put down to rounding) is taken
     as its nearest rotation; off by exactly 1e-6 it is kept as written."""
@@ -542,7 +531,6 @@ def test_toml_reader_and_writer_details(tmp_path):
     RigCalibration([cam]).write(path, "toml")
     assert tomllib.loads(path.read_text())["metadata"] == {
         "adjusted": False, "error": 0.0, "studio_ground": {"normal": [0.0, 0.0, 1.0], "offset": 0.0}}
-
 
 
 def test_easymocap_pair_of_any_name_given_the_format(tmp_path):

@@ -16,8 +16,9 @@ import pytest
 import yaml
 from scipy.spatial.transform import Rotation
 
-from calibration import Camera, CalibrationError, RigCalibration
+from calibration import Camera, RigCalibration
 from calibration.formats import reader
+from formatkit import assert_error, raised
 
 K = [[900.0, 0.0, 640.0], [0.0, 905.0, 360.0], [0.0, 0.0, 1.0]]
 
@@ -34,19 +35,6 @@ def svd_rotation(M) -> np.ndarray:
     R = U @ Vt
     assert np.linalg.det(R) > 0
     return R
-
-
-def raised(fn, *args, **kwargs) -> CalibrationError:
-    with pytest.raises(CalibrationError) as info:
-        fn(*args, **kwargs)
-    return info.value
-
-
-def assert_error(exc: CalibrationError, detail: str, *, camera=None, field=None, file=None):
-    """The whole error: its detail, camera and field (and file, when given)."""
-    assert (exc.detail, exc.camera, exc.field) == (detail, camera, field)
-    if file is not None:
-        assert exc.file == str(file)
 
 
 def _numpy_reason(values) -> str:

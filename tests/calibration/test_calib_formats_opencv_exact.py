@@ -14,25 +14,15 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
-from calibration import Camera, CalibrationError, GroundPlane, RigCalibration
+from calibration import Camera, GroundPlane, RigCalibration
 from calibration.formats import reader
 from calibration.formats.opencv import MAX_BYTES, MAX_NESTING, _check_text
+from formatkit import assert_error, raised
 
 K = [[500.0, 0.0, 320.0], [0.0, 510.0, 240.0], [0.0, 0.0, 1.0]]
 RV = [0.1, -0.2, 0.3]
 R = Rotation.from_rotvec(RV).as_matrix()
 GAP = np.max(np.abs(Rotation.from_rotvec([0.1, -0.2, 0.31]).as_matrix() - R))
-
-
-def raised(fn, *args, **kwargs) -> CalibrationError:
-    with pytest.raises(CalibrationError) as info:
-        fn(*args, **kwargs)
-    return info.value
-
-
-def assert_error(exc, detail, *, camera=None, field=None, file=None):
-    assert (exc.detail, exc.camera, exc.field) == (detail, camera, field)
-    assert exc.file == (None if file is None else str(file))
 
 
 def mat(key, values, shape=None) -> str:
@@ -252,7 +242,6 @@ def test_writer_document_read_with_filestorage(tmp_path):
         assert_error(raised(one.write, tmp_path / "x", "opencv"),
                      "camera names must be plain words to form FileStorage keys like K_<name>", camera=bad,
                      field="name", file=tmp_path / "x" / "intri.yml")
-
 
 
 def test_rotation_tolerances_at_their_bounds(tmp_path):

@@ -14,21 +14,11 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
-from calibration import Camera, CalibrationError, RigCalibration
+from calibration import Camera, RigCalibration
 from calibration.formats import RigParts, reader
 from calibration.formats.opencv_camera import _board_hint, _media_size, read_camera_file, read_camera_pairs
 from calibration.ground import GroundPlane
-
-
-def raised(fn, *args, **kwargs) -> CalibrationError:
-    with pytest.raises(CalibrationError) as info:
-        fn(*args, **kwargs)
-    return info.value
-
-
-def assert_error(exc, detail, *, camera=None, field=None, file=None):
-    assert (exc.detail, exc.camera, exc.field) == (detail, camera, field)
-    assert exc.file == (None if file is None else str(file))
+from formatkit import assert_error, raised
 
 
 def _matrix(key, rows, cols, values) -> str:
@@ -290,7 +280,6 @@ def test_writer_layout_read_back_with_elementtree(tmp_path):
     fish = cams[0].replace(model="fisheye", dist=np.array([0.01, 0.0, 0.0, 0.0]))
     assert_error(raised(RigCalibration([fish]).write, out, "opencv_camera"),
                  "the per-camera OpenCV layout has no fisheye model", camera="left", field="model", file=out)
-
 
 
 def test_rotation_tolerances_at_their_bounds(tmp_path):

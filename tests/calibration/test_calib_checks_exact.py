@@ -256,3 +256,55 @@ def test_cameras_all_at_one_point_carry_no_pose_information():
     assert settle(p).notes == ("units: not applicable (no camera pose in the file)",
                                "up axis: not applicable (no camera pose)")
     np.testing.assert_allclose(settle(p).cameras["a"].center, [0.001, 0.002, 0.003], rtol=0, atol=1e-18)
+
+
+def test_detect_units_below_one_unit_is_metres():
+    """A spread of half a file unit (a 12 cm stereo pair in metres) is metres too: the bound
+    is 0 < spread ≤ 25."""
+    from calibration.formats.checks import detect_units
+
+    assert detect_units(0.5) == "m" and detect_units(1.0) == "m" and detect_units(1e-9) == "m"
+
+
+def test_notes_whole_for_arbitrary_and_unknown_reader_units():
+    p = parts_of(cam("a", [0, 0, 2]), cam("b", [1, 0, 2]), units="arbitrary", units_fixed=False)
+    assert settle(p).notes[0] == ("units: arbitrary (the format has no scale); taken as metres — set the scale with a "
+                                  "floor or board calibration before measuring")
+    big = parts_of(cam("a", [0, 0, 2000]), cam("b", [1000, 0, 2000]), units="feet", units_fixed=False)
+    assert settle(big).notes[0] == "units: mm (detected: camera centres spread over 1000 file units)"
+
+
+def test_normals_in_warnings_rounded_to_three_decimals():
+    a = 0.5
+    n = [np.sin(a), 0.0, -np.cos(a)]  # [0.479, 0.0, -0.878]: pointing down and sideways
+    own = parts_of(cam("a", [0, 0, -2], np.eye(3)), cam("b", [1, 0, -3], np.eye(3)), ground=GroundPlane(n, 0.0),
+                   own_frame=True)
+    notes = settle(own).notes
+    assert "[0.479, 0.0, -0.878]" in notes[-1]
+
+
+def test_facing_count_centroid_and_bounds():
+    """c1 at (10, 1, 2) and c2 at (10, -1, 2) look along -x. Camera 0 at (8, 0, 2) looking
+    along +x has the others' centroid (10, 0, 2) 2 m ahead: all three face (c1's centroid of
+    the others (9, -0.5, 2) is 1 m ahead of it). At (10, 0, 2) looking along +y every camera
+    has its centroid exactly sideways (dot 0): none counts. At (9.5, 0, 2) looking along +x
+    the dots are 0.5, 0.25, 0.25 (less than 1): all count. Three cameras at one point: not
+    checked."""
+    def look(name, C, z):
+        z = np.asarray(z, float)
+        x = np.cross([0, 0, 1.0], z)
+        return cam(name, C, np.array([x, np.cross(z, x), z]))
+
+    c1, c2 = look("c1", [10, 1, 2], [-1, 0, 0]), look("c2", [10, -1, 2], [-1, 0, 0])
+    rigs = {"ahead": look("c0", [8, 0, 2], [1, 0, 0]), "sideways": look("c0", [10, 0, 2], [0, 1, 0]),
+            "near": look("c0", [9.5, 0, 2], [1, 0, 0])}
+    counts = {k: facing_count({"c0": c0, "c1": c1, "c2": c2}) for k, c0 in rigs.items()}
+    assert counts == {"ahead": (3, 3), "sideways": (0, 3), "near": (3, 3)}
+    one = {k: cam(k, [1, 2, 3]) for k in ("a", "b", "c")}
+    assert facing_count(one) == (0, 0)
+
+
+def test_refusal_names_the_default_source():
+    p = parts_of(cam("a", [0, 0, -2], np.eye(3)), cam("b", [1, 0, -2], np.eye(3)))
+    exc = pytest.raises(CalibrationError, settle, p, z_down="refuse").value
+    assert exc.file == "calibration"

@@ -543,3 +543,15 @@ def test_easymocap_pair_of_any_name_given_the_format(tmp_path):
     for name in ("intri.txt", "extri.txt"):
         parts = read(tmp_path / name, "opencv", z_down="keep")
         np.testing.assert_array_equal(parts.cameras["c1"].R, R1)
+
+
+def test_multi_line_parser_messages_on_one_line_and_latin1_heads(tmp_path):
+    import yaml
+
+    bad = tmp_path / "camchain.yaml"
+    bad.write_text("cam0: [1, 2\ncam1: 3\n")
+    expected = f"not valid YAML ({reason(yaml.safe_load, bad.read_text()).replace(chr(10), ' ')})"
+    assert "\n" in reason(yaml.safe_load, bad.read_text())
+    assert_error(raised(read_document, bad, yaml.safe_load, "YAML", (yaml.YAMLError,)), expected, file=bad)
+    (tmp_path / "l.x").write_bytes("<calibration>é".encode("latin-1"))
+    assert detect_format(tmp_path / "l.x") == "qualisys"

@@ -146,8 +146,7 @@ def read_colmap(path: str | PathLike):
                 log.warning("%s: image %s has no pose; skipped", path, image.name)
                 continue
             K, dist, lens = _intrinsics(image.camera, name, path)
-            pose = image.cam_from_world
-            pose = pose() if callable(pose) else pose  # a method since pycolmap 3.12
+            pose = image.cam_from_world()  # a method since pycolmap 3.12 (the version required)
             R = np.asarray(pose.rotation.matrix(), dtype=np.float64)
             t = np.asarray(pose.translation, dtype=np.float64)
             cam = image.camera
@@ -233,14 +232,8 @@ def write_colmap(rig, path: str | PathLike, binary: bool = False) -> Path:
         pc = pycolmap.Camera(model=model, width=cam.width, height=cam.height, params=params, camera_id=i)
         image = pycolmap.Image(name=name, camera_id=i, image_id=i)
         pose = pycolmap.Rigid3d(pycolmap.Rotation3d(np.asarray(cam.R)), np.asarray(cam.t))
-        if hasattr(rec, "add_image_with_trivial_frame"):  # pycolmap >= 3.12: rigs and frames
-            rec.add_camera_with_trivial_rig(pc)
-            rec.add_image_with_trivial_frame(image, pose)
-        else:  # pragma: no cover - older pycolmap: the pose lives on the image
-            rec.add_camera(pc)
-            image.cam_from_world = pose
-            rec.add_image(image)
-            rec.register_image(i)
+        rec.add_camera_with_trivial_rig(pc)  # pycolmap >= 3.12 (required): rigs and frames
+        rec.add_image_with_trivial_frame(image, pose)
     path.mkdir(parents=True, exist_ok=True)
     ext, other = (".bin", ".txt") if binary else (".txt", ".bin")
     has_points = (path / ("points3D" + ext)).exists()

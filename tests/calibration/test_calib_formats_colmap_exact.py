@@ -88,7 +88,9 @@ def test_colmap_names_order_notes_and_skipped_images(tmp_path, caplog):
     assert parts.notes == ("no studio_rig.json beside the model: the floor is assumed to be z = 0",)
     assert (parts.units, parts.own_frame) == ("arbitrary", False)
     assert parts.metadata == {"ground_source": f"assumed z = 0: no studio_rig.json in {folder}"}
-    assert f"{folder}: no studio_rig.json beside the COLMAP model (COLMAP has no floor)" in caplog.text
+    assert [r.getMessage() for r in caplog.records if r.name == "calibration.formats.colmap"] == [
+        f"{folder}: no studio_rig.json beside the COLMAP model (COLMAP has no floor): the ground plane is assumed to "
+        "be z = 0 — calibrate the floor (`studio calibrate floor`) if it is not"]
 
 
 def test_colmap_sidecar_ground_metadata_and_version(tmp_path):
@@ -130,6 +132,9 @@ def test_colmap_refusals(tmp_path):
                  "RADIAL_FISHEYE, SIMPLE_RADIAL_FISHEYE)", camera="c", field="model", file=folder)
     folder = model(tmp_path / "c", ["PINHOLE 640 480 800 801 320.5 240.5"], [])
     assert_error(raised(reader("colmap"), folder), "no registered images", field="images", file=folder)
+    (folder / "cameras.txt").write_text("1 PINHOLE 640\n")
+    exc = raised(reader("colmap"), folder)
+    assert exc.detail.startswith("pycolmap cannot read the model (") and exc.file == str(folder)
 
 
 def test_colmap_zero_quaternion_in_images_txt(tmp_path):

@@ -141,7 +141,10 @@ def read_colmap(path: str | PathLike):
     try:
         for image_id in sorted(rec.images):
             image = rec.images[image_id]
-            name = _camera_name(image.name)
+            try:
+                name = _camera_name(image.name)
+            except UnicodeDecodeError as exc:
+                raise CalibrationError(f"image {image_id}: its name is not UTF-8 text ({exc})", field="NAME") from None
             if not image.has_pose:
                 log.warning("%s: image %s has no pose; skipped", path, image.name)
                 continue

@@ -218,3 +218,29 @@ def test_colmap_writer_refusals(tmp_path):
     assert_error(raised(RigCalibration([prism]).write, tmp_path / "m", "colmap"),
                  "thin-prism/tilt terms (coefficients 9-14) have no COLMAP model", camera="p", field="dist",
                  file=tmp_path / "m")
+
+
+def test_colmap_points_lines_are_not_poses_and_bytes_are_tolerated(tmp_path):
+    """Only every other data line of images.txt is a pose: a POINTS2D line whose numbers would
+    read as a NaN quaternion is not checked; a byte that is not UTF-8 in an image name does
+    not stop the check (pycolmap then reads or names the file itself)."""
+    folder = model(tmp_path / "m", ["PINHOLE 640 480 800 801 320.5 240.5"], [image(np.eye(3), [0, 0, 3], 1, "a")])
+    lines = (folder / "images.txt").read_text().split("\n")
+    lines[2] = "1.5 nan -1 2.5 3.5 -1 4.5 5.5 -1"  # x y POINT3D_ID triples, y = nan: not a pose
+    (folder / "images.txt").write_text("\n".join(lines))
+    assert list(reader("colmap")(folder).cameras) == ["a"]
+    raw = (folder / "images.txt").read_bytes().replace(b" a\n", b" a\xff\n")
+    (folder / "images.txt").write_bytes(raw)
+    assert_error(raised(reader("colmap"), folder), "image 1: its name is not UTF-8 text ('utf-8' codec can't decode "
+                 "byte 0xff in position 1: invalid start byte)", field="NAME", file=folder)
+
+
+def test_colmap_writer_creates_parents_and_removes_a_stale_binary_model(tmp_path):
+    rig = RigCalibration([Camera("a", K, [], np.eye(3), [0.0, 0.0, 3.0], (640, 480))])
+    from calibration.formats.colmap import write_colmap
+
+    out = tmp_path / "x" / "y" / "m"
+    write_colmap(rig, out, binary=True)
+    rig.write(out, "colmap")  # text now: the binary calibration files go, points3D.bin stays
+    assert sorted(p.name for p in out.iterdir()) == ["cameras.txt", "frames.txt", "images.txt", "points3D.bin",
+                                                     "points3D.txt", "rigs.txt", "studio_rig.json"]

@@ -60,6 +60,7 @@ def extri(name="c1", rvec=RV, rot=R, t=(0.1, 0.2, 3.0)) -> str:
 
 
 def files(tmp_path, i_text, e_text):
+    tmp_path.mkdir(parents=True, exist_ok=True)
     (tmp_path / "intri.yml").write_text(i_text)
     (tmp_path / "extri.yml").write_text(e_text)
     return tmp_path / "intri.yml", tmp_path / "extri.yml"
@@ -259,3 +260,21 @@ def test_rotation_tolerances_at_their_bounds(tmp_path):
         else:
             np.testing.assert_array_equal(parts.cameras["c1"].R, M)
             assert parts.notes == ("units: EasyMocap's documentation asks for metres",)
+
+
+def test_extri_anywhere_names_with_x_and_odd_rotations(tmp_path):
+    """to_opencv with an extri path of its own, in a folder not there yet; camera names may hold
+    an X; a Rot_ of another shape is named by the camera check; a singular Rot_ is refused as
+    not a rotation (err 1 > 1e-4), not passed on."""
+    rig = RigCalibration([Camera("camX1", K, [], R, [0.1, 0.2, 3.0], (640, 480))])
+    i, e = rig.to_opencv(tmp_path / "a" / "in.yml", tmp_path / "b" / "c" / "out.yml")
+    assert (i, e) == (tmp_path / "a" / "in.yml", tmp_path / "b" / "c" / "out.yml") and e.is_file()
+    parts = reader("opencv")(i, e)
+    np.testing.assert_array_equal(parts.cameras["camX1"].R, R)
+    paths = files(tmp_path / "d", doc(intri()), doc(extri(rot=np.eye(3).ravel()[:9].reshape(1, 9))))
+    assert_error(raised(reader("opencv"), *paths), "expected shape (3, 3), got (1, 9)", camera="c1", field="Rot_c1",
+                 file=paths[1])
+    paths = files(tmp_path / "e", doc(intri()), doc(extri(rvec=None, rot=np.zeros((3, 3)))))
+    assert_error(raised(reader("opencv"), *paths),
+                 "not a rotation: max |R Rᵀ - I| = 1, more than rounding to few decimals explains (0.0001)",
+                 camera="c1", field="Rot_c1", file=paths[1])

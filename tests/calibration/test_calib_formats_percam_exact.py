@@ -300,3 +300,15 @@ def test_rotation_tolerances_at_their_bounds(tmp_path):
         else:
             np.testing.assert_array_equal(cam.R, M)
             assert notes == []
+
+
+def test_pairs_keep_every_cameras_notes_and_names_with_x(tmp_path):
+    for name in ("camX", "b"):
+        (tmp_path / name).mkdir()
+        (tmp_path / name / "config.xml").write_text(_course())
+    parts = reader("opencv_camera")(tmp_path)
+    assert [n.split(":")[0] for n in parts.notes] == ["warning", "warning"]
+    assert "camera 'b'" in parts.notes[0] and "camera 'camX'" in parts.notes[1]  # folders in name order
+    rig = RigCalibration([Camera("camX", KM, [], np.eye(3), [0, 0, 1], (640, 480))])
+    rig.write(tmp_path / "out", "opencv_camera")
+    assert (tmp_path / "out" / "camX" / "config.xml").is_file()

@@ -278,3 +278,18 @@ def test_extri_anywhere_names_with_x_and_odd_rotations(tmp_path):
     assert_error(raised(reader("opencv"), *paths),
                  "not a rotation: max |R Rᵀ - I| = 1, more than rounding to few decimals explains (0.0001)",
                  camera="c1", field="Rot_c1", file=paths[1])
+
+
+def test_distortion_absent_or_malformed_and_extri_names(tmp_path):
+    """Neither dist_ nor D_: a camera without distortion; a text element in dist_ or D_ named;
+    a duplicate in extri's names named in extri."""
+    parts = read(tmp_path / "a", doc(intri(dist=None)), doc(extri()))
+    assert parts.cameras["c1"].dist.size == 0
+    for key in ("dist", "D"):
+        text = doc(intri(key=key)).replace("data: [ -0.2,", 'data: [ "x",')
+        paths = files(tmp_path / key, text, doc(extri()))
+        assert_error(raised(reader("opencv"), *paths), "element 0 is 'x': expected a number", camera="c1",
+                     field=f"{key}_c1", file=paths[0])
+    paths = files(tmp_path / "n", doc(intri()), doc(extri(), names=("c1", "c1")))
+    assert_error(raised(reader("opencv"), *paths), "camera 'c1' is listed twice (entries 0 and 1): expected unique "
+                 "names", field="names", file=paths[1])

@@ -312,3 +312,23 @@ def test_pairs_keep_every_cameras_notes_and_names_with_x(tmp_path):
     rig = RigCalibration([Camera("camX", KM, [], np.eye(3), [0, 0, 1], (640, 480))])
     rig.write(tmp_path / "out", "opencv_camera")
     assert (tmp_path / "out" / "camX" / "config.xml").is_file()
+
+
+def test_rounded_reflections_singular_and_shrunk_rotations(tmp_path):
+    """A reflection written with 5 decimals is not turned into a rotation (the camera check
+    refuses it); a singular matrix is refused as not a rotation; a rotation shrunk by 2e-5
+    (det < 1, within rounding) is taken as its nearest rotation."""
+    path = tmp_path / "config.xml"
+    F = np.round(Rotation.from_rotvec([0.3, -1.2, 0.5]).as_matrix() @ np.diag([1.0, 1.0, -1.0]), 5)
+    path.write_text(_course(rvec=F, rshape=(3, 3)))
+    err = np.max(np.abs(F @ F.T - np.eye(3)))
+    assert_error(raised(read_camera_file, path, "c"), f"not orthonormal (max |R Rᵀ - I| = {err:.3g} > 1e-06)",
+                 camera="c", field="Rotation", file=path)  # kept as written: not made a rotation
+    path.write_text(_course(rvec=np.zeros((3, 3)), rshape=(3, 3)))
+    assert_error(raised(read_camera_file, path, "c"), "not a rotation: max |R Rᵀ - I| = 1 > 0.0001", camera="c",
+                 field="Rotation", file=path)
+    R = Rotation.from_rotvec([0.3, -1.2, 0.5]).as_matrix() * (1 - 2e-5)
+    assert np.linalg.det(R) < 1
+    path.write_text(_course(rvec=R, rshape=(3, 3)))
+    U, _, Vt = np.linalg.svd(R)
+    np.testing.assert_allclose(read_camera_file(path, "c")[0].R, U @ Vt, rtol=0, atol=1e-15)

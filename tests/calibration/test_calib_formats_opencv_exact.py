@@ -293,3 +293,22 @@ def test_distortion_absent_or_malformed_and_extri_names(tmp_path):
     paths = files(tmp_path / "n", doc(intri()), doc(extri(), names=("c1", "c1")))
     assert_error(raised(reader("opencv"), *paths), "camera 'c1' is listed twice (entries 0 and 1): expected unique "
                  "names", field="names", file=paths[1])
+
+
+def test_nesting_counted_after_closed_pairs_and_more_text_elements(tmp_path):
+    """Depth is counted from the start: a closed pair before 65 open brackets is still 65 deep.
+    Text in W_ or Rot_ is named; two cameras without a size are both listed in the warning."""
+    path = tmp_path / "deep.yml"
+    path.write_text("a: [] " + "[" * 65 + "]" * 65)
+    assert_error(raised(_check_text, path), "nested more than 64 levels deep: not a calibration", file=path)
+    i_text = doc(intri(size=None), "H_c1: 480\nW_c1: x\n")
+    paths = files(tmp_path / "w", i_text, doc(extri()))
+    assert_error(raised(reader("opencv"), *paths), "element 0 is 'x': expected a number", camera="c1", field="W_c1",
+                 file=paths[0])
+    e_text = doc(extri()).replace("data: [ " + ", ".join(repr(float(v)) for v in R.ravel()), "data: [ \"x\"")
+    paths = files(tmp_path / "r", doc(intri()), e_text)
+    assert_error(raised(reader("opencv"), *paths), "element 0 is 'x': expected a number", camera="c1", field="Rot_c1",
+                 file=paths[1])
+    parts = read(tmp_path / "two", doc(intri(size=None), intri("c2", size=None), names=("c1", "c2")),
+                 doc(extri(), extri("c2"), names=None))
+    assert parts.notes[1] == ("warning: no H_/W_ image size for c1, c2: guessed from the principal point (2 c + 1)")

@@ -308,3 +308,10 @@ def test_refusal_names_the_default_source():
     p = parts_of(cam("a", [0, 0, -2], np.eye(3)), cam("b", [1, 0, -2], np.eye(3)))
     exc = pytest.raises(CalibrationError, settle, p, z_down="refuse").value
     assert exc.file == "calibration"
+
+
+def test_normal_pointing_away_rounded_to_three_decimals():
+    a = 0.5
+    own = parts_of(cam("a", [0, 0, 2]), cam("b", [1, 0, 3]), ground=GroundPlane([np.sin(a), 0.0, -np.cos(a)], 0.0),
+                   own_frame=True)
+    assert "the ground normal [0.479, 0.0, -0.878] points away from the cameras" in settle(own).notes[-1]

@@ -208,9 +208,7 @@ def _raw(path: Path, fmt: str) -> RigParts:
         if path.name.lower().startswith("extri"):
             return reader(fmt)(path.with_name(path.name.replace("extri", "intri")), path)
         return reader(fmt)(path, path.with_name(path.name.replace("intri", "extri")))
-    if fmt == "colmap" and not path.is_dir():
-        path = path.parent
-    return reader(fmt)(path)
+    return reader(fmt)(path)  # a COLMAP file stands for its folder: read_colmap reads the folder
 
 
 def read(path: str | PathLike, fmt: str | None = None, *, units: str | None = None,

@@ -205,7 +205,7 @@ def facing_count(cameras) -> tuple[int, int]:
 
 def _facing_note(cameras) -> list[str]:
     facing, n = facing_count(cameras)
-    if n == 0 or 2 * facing > n:
+    if n == 0 or 2 * facing >= n:
         return []
     return [f"warning: only {facing} of {n} cameras look towards the others: the file's rotation convention may "
             "differ from OpenCV's (world → camera, camera looking along +z), e.g. an extra half turn about the "

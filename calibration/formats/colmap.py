@@ -141,13 +141,15 @@ def read_colmap(path: str | PathLike):
     try:
         for image_id in sorted(rec.images):
             image = rec.images[image_id]
-            name = _camera_name(image.name)
+            try:
+                name = _camera_name(image.name)
+            except UnicodeDecodeError as exc:
+                raise CalibrationError(f"image {image_id}: its name is not UTF-8 text ({exc})", field="NAME") from None
             if not image.has_pose:
                 log.warning("%s: image %s has no pose; skipped", path, image.name)
                 continue
             K, dist, lens = _intrinsics(image.camera, name, path)
-            pose = image.cam_from_world
-            pose = pose() if callable(pose) else pose  # a method since pycolmap 3.12
+            pose = image.cam_from_world()  # a method since pycolmap 3.12 (the version required)
             R = np.asarray(pose.rotation.matrix(), dtype=np.float64)
             t = np.asarray(pose.translation, dtype=np.float64)
             cam = image.camera
@@ -166,6 +168,9 @@ def read_colmap(path: str | PathLike):
         else:
             try:
                 doc = json.loads(sidecar.read_text())
+                if not isinstance(doc, dict):
+                    raise CalibrationError(f"bad sidecar (expected a JSON object, got {type(doc).__name__})",
+                                           field="ground")
                 if str(doc.get("version", 1)).split(".")[0] != "1":
                     raise CalibrationError(
                         f"unknown major version {doc['version']!r} (this reader knows 1)",
@@ -230,14 +235,8 @@ def write_colmap(rig, path: str | PathLike, binary: bool = False) -> Path:
         pc = pycolmap.Camera(model=model, width=cam.width, height=cam.height, params=params, camera_id=i)
         image = pycolmap.Image(name=name, camera_id=i, image_id=i)
         pose = pycolmap.Rigid3d(pycolmap.Rotation3d(np.asarray(cam.R)), np.asarray(cam.t))
-        if hasattr(rec, "add_image_with_trivial_frame"):  # pycolmap >= 3.12: rigs and frames
-            rec.add_camera_with_trivial_rig(pc)
-            rec.add_image_with_trivial_frame(image, pose)
-        else:  # pragma: no cover - older pycolmap: the pose lives on the image
-            rec.add_camera(pc)
-            image.cam_from_world = pose
-            rec.add_image(image)
-            rec.register_image(i)
+        rec.add_camera_with_trivial_rig(pc)  # pycolmap >= 3.12 (required): rigs and frames
+        rec.add_image_with_trivial_frame(image, pose)
     path.mkdir(parents=True, exist_ok=True)
     ext, other = (".bin", ".txt") if binary else (".txt", ".bin")
     has_points = (path / ("points3D" + ext)).exists()

@@ -139,7 +139,7 @@ def read_multical(path) -> RigParts:
 def write_multical(rig, path) -> Path:
     """Write ``cameras`` and absolute ``camera_poses`` (one world -> camera entry per camera)."""
     path = Path(path)
-    models = {4: "standard", 5: "standard", 8: "rational", 12: "thin_prism", 14: "tilted"}
+    models = {8: "rational", 12: "thin_prism", 14: "tilted"}  # 4 or 5 coefficients: "standard"
     doc = {"cameras": {}, "camera_poses": {}}
     for name, cam in rig.cameras.items():
         if cam.model != "pinhole":

@@ -107,8 +107,15 @@ def _open(path: Path):
     if not path.is_file():
         raise CalibrationError("no such file", file=path)
     _check_text(path)
+    return open_storage(str(path), cv2.FILE_STORAGE_READ, path)
+
+
+def open_storage(source: str, flags: int, path: Path):
+    """``cv2.FileStorage(source, flags)``, opened, or an error naming ``path`` with OpenCV's reason."""
+    import cv2
+
     try:
-        fs = cv2.FileStorage(str(path), cv2.FILE_STORAGE_READ)
+        fs = cv2.FileStorage(source, flags)
         opened = fs.isOpened()
     except (cv2.error, SystemError) as exc:  # the binding may wrap cv2.error in SystemError
         opened, reason = False, str(getattr(exc, "err", None) or exc.__cause__ or exc)
@@ -216,11 +223,7 @@ def read_opencv(intri_path, extri_path=None):
             H = _mat(fi, f"H_{name}", intri_p, name, required=False)
             W = _mat(fi, f"W_{name}", intri_p, name, required=False)
             if H is None or W is None:
-                if K.shape != (3, 3):
-                    raise CalibrationError(
-                        f"expected shape (3, 3), got {K.shape}", file=intri_p, camera=name, field=f"K_{name}"
-                    )
-                size = (int(round(2 * K[0, 2] + 1)), int(round(2 * K[1, 2] + 1)))
+                size = size_from_principal_point(K, intri_p, name, f"K_{name}")
                 guessed.append(name)
             else:
                 size = (float(W), float(H))
@@ -283,6 +286,15 @@ def read_opencv(intri_path, extri_path=None):
     finally:
         fi.release()
         fe.release()
+
+
+def size_from_principal_point(K: np.ndarray, path: Path, camera: str, key: str) -> tuple[int, int]:
+    """The image size a centred principal point implies, ``(2 cx + 1, 2 cy + 1)`` rounded (pixel
+    centres at integers: an image of ``w`` pixels has its centre at ``(w - 1) / 2``); the guess of
+    files that do not state the size. ``K`` must be 3x3 (the error names ``key``)."""
+    if K.shape != (3, 3):
+        raise CalibrationError(f"expected shape (3, 3), got {K.shape}", file=path, camera=camera, field=key)
+    return int(round(2 * K[0, 2] + 1)), int(round(2 * K[1, 2] + 1))
 
 
 def _rotation(Rot, rvec, path: Path, name: str) -> tuple[np.ndarray, bool]:

@@ -38,7 +38,7 @@ import numpy as np
 from calibration.camera import Camera
 from calibration.errors import CalibrationError
 from calibration.formats import RigParts
-from calibration.formats.opencv import _check_text, _mat, _open
+from calibration.formats.opencv import _check_text, _mat, _open, open_storage, size_from_principal_point
 from calibration.ground import GroundPlane
 from calibration.rotation import nearest_rotation, rotvec_to_matrix
 from rigs.atomic import atomic_path
@@ -106,10 +106,7 @@ def _open_storage(path: Path):
     if not text.lstrip().startswith("<opencv_storage"):
         return _open(path)
     _check_text(path)
-    fs = cv2.FileStorage('<?xml version="1.0"?>\n' + text, cv2.FILE_STORAGE_READ | cv2.FILE_STORAGE_MEMORY)
-    if not fs.isOpened():
-        raise CalibrationError("not an OpenCV FileStorage file", file=path)
-    return fs
+    return open_storage('<?xml version="1.0"?>\n' + text, cv2.FILE_STORAGE_READ | cv2.FILE_STORAGE_MEMORY, path)
 
 
 def read_camera_file(path: Path, name: str) -> tuple[Camera, list[str], bool]:
@@ -146,10 +143,7 @@ def read_camera_file(path: Path, name: str) -> tuple[Camera, list[str], bool]:
                 size = found[0]
                 notes.append(f"camera {name!r}: image size {size[0]}x{size[1]} from {found[1]} beside the file")
             else:
-                if K.shape != (3, 3):
-                    raise CalibrationError(f"expected shape (3, 3), got {K.shape}", file=path, camera=name,
-                                           field=layout[0])
-                size = (int(round(2 * K[0, 2] + 1)), int(round(2 * K[1, 2] + 1)))
+                size = size_from_principal_point(K, path, name, layout[0])
                 notes.append(f"warning: camera {name!r}: no image size in the file and no video or image beside "
                              f"it: guessed {size[0]}x{size[1]} from the principal point (2 c + 1)")
         try:

@@ -76,10 +76,11 @@ def _parse(path: Path):
         return ET.fromstring(data)
     except ET.ParseError:
         pass
-    try:  # a declaration naming UTF-16LE on a BOM-marked file: expat wants the text decoded
+    try:  # a declaration naming another encoding than the bytes' (UTF-16BE on a UTF-16LE file): parsed
+        # as decoded text, whose declared encoding ElementTree then ignores
         text = data.decode("utf-16") if data[:2] in (b"\xff\xfe", b"\xfe\xff") else data.decode("utf-8")
-        return ET.fromstring(text.split("?>", 1)[1] if text.lstrip("\ufeff").startswith("<?xml") else text)
-    except (UnicodeDecodeError, ET.ParseError, IndexError) as exc:
+        return ET.fromstring(text)
+    except (UnicodeDecodeError, ET.ParseError) as exc:
         raise CalibrationError(f"not valid XML ({exc})", file=path) from None
 
 

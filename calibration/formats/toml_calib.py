@@ -32,6 +32,7 @@ import tomli_w
 from calibration.camera import Camera
 from calibration.errors import CalibrationError
 from calibration.formats import RigParts
+from calibration.formats.text import read_document
 from rigs.atomic import atomic_write_text
 from calibration.ground import GroundPlane
 
@@ -88,16 +89,7 @@ def _units(meta: dict) -> tuple[str, tuple[str, ...]]:
 
 def read_toml(path: str | PathLike):
     path = Path(path)
-    try:
-        with open(path, "rb") as f:
-            doc = tomllib.load(f)
-    except OSError as exc:
-        raise CalibrationError(f"cannot read ({exc.strerror})", file=path) from None
-    except UnicodeDecodeError as exc:
-        raise CalibrationError(f"not UTF-8 text (byte {exc.start}): expected a UTF-8 TOML file", file=path) from None
-    except (tomllib.TOMLDecodeError, RecursionError) as exc:
-        reason = "nested too deeply" if isinstance(exc, RecursionError) else str(exc)
-        raise CalibrationError(f"not valid TOML ({reason})", file=path) from None
+    doc = read_document(path, tomllib.loads, "TOML", (tomllib.TOMLDecodeError,))
     meta = dict(doc.get("metadata", {}))
     try:
         cameras = {}

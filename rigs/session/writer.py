@@ -53,7 +53,6 @@ class SessionWriter:
         self._pool = ThreadPoolExecutor(workers, thread_name_prefix="session-writer") if workers > 1 else None
         self._cameras = cameras
         self._info = info
-        self._durability = durability
         self._compression = compression
         self._fsync = durability == "fsync"
         self._specs: dict[str, dict] = {}
@@ -225,9 +224,7 @@ class SessionWriter:
             )
         if image.ndim == 3 and image.shape[2] == 2 and imageio.image_suffix(image) == ".png":
             raise SessionError(f"{what}, camera '{camera}': 2-channel integer images are not storable as PNG")
-        if image.ndim == 3 and image.shape[2] == 1:
-            image = image[:, :, 0]
-        spec = _image_spec(image)
+        spec = _image_spec(image)  # (H, W, 1) is described as (H, W): one channel
         known = self._specs.get(camera)
         if known is None:
             return spec

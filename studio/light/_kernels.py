@@ -16,6 +16,8 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
+from studio.render.winding import scan_segment
+
 __all__ = ["shadow_chamfer"]
 
 
@@ -145,6 +147,7 @@ def shadow_chamfer(V, n, na, sign, eu, ev, f_uv, f_vu, lights, plane, M, occ, dm
     uv = np.empty((2 * J * eu.shape[0], 4))
     diff = np.zeros((h, w + 1), dtype=np.int32)
     model = np.zeros((h, w), dtype=np.bool_)
+    box = np.empty(4, dtype=np.int64)
     r = int(np.ceil(tau))
     for i in range(N):
         m = 0
@@ -158,24 +161,10 @@ def shadow_chamfer(V, n, na, sign, eu, ev, f_uv, f_vu, lights, plane, M, occ, dm
         for k in range(C):
             ms = _clip_and_project(seg, m, M[k], plane, uv)
             # winding fill (as studio.render.winding.winding_fill)
-            ya, yb, xa, xb = h, -1, w, -1
+            box[0], box[1], box[2], box[3] = h, -1, w, -1
             for s in range(ms):
-                px, py, qx, qy = uv[s, 0], uv[s, 1], uv[s, 2], uv[s, 3]
-                ylo = max(np.ceil(min(py, qy)), 0.0)
-                yhi = min(np.ceil(max(py, qy)) - 1.0, h - 1.0)
-                if not np.isfinite(ylo + yhi) or yhi < ylo:
-                    continue
-                sg = 1 if qy > py else -1
-                slope = (qx - px) / (qy - py)
-                y = ylo
-                while y <= yhi:
-                    x = px + (y - py) * slope
-                    xi = int(min(max(np.ceil(x), 0.0), w))
-                    yi = int(y)
-                    diff[yi, xi] += sg
-                    ya, yb = min(ya, yi), max(yb, yi)
-                    xa, xb = min(xa, xi), max(xb, xi)
-                    y += 1.0
+                scan_segment(uv[s, 0], uv[s, 1], uv[s, 2], uv[s, 3], diff, box)
+            ya, yb, xa, xb = box[0], box[1], box[2], box[3]
             fwd, count = 0.0, 0
             if yb >= 0 and xa < w:
                 for yi in range(ya, yb + 1):

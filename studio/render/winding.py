@@ -12,7 +12,7 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-__all__ = ["front_faces", "contour_edges", "project_pinhole", "winding_fill"]
+__all__ = ["front_faces", "contour_edges", "project_pinhole", "scan_segment", "winding_fill"]
 
 
 @njit(cache=True, nogil=True)
@@ -68,31 +68,41 @@ def contour_edges(facing, u, v, f_uv, f_vu, n_vertices):  # pragma: no cover - c
 
 
 @njit(cache=True, nogil=True)
+def scan_segment(px, py, qx, qy, diff, box):  # pragma: no cover - compiled
+    """Add the directed segment (px, py) → (qx, qy) to the row differences ``diff`` (h, w + 1)
+    int32: ±1 at the first pixel centre right of its crossing of each row ``y`` (pixel centres
+    at integer coordinates, rows ``lo ≤ y < hi``); ``box`` (4,) int64 [y_min, y_max, x_min,
+    x_max] of the cells touched, grown in place. A running sum of ``diff`` along a row is the
+    winding number of the segments added."""
+    h = diff.shape[0]
+    w = diff.shape[1] - 1
+    ylo = max(np.ceil(min(py, qy)), 0.0)
+    yhi = min(np.ceil(max(py, qy)) - 1.0, h - 1.0)
+    if not np.isfinite(ylo + yhi) or yhi < ylo:
+        return
+    s = 1 if qy > py else -1
+    slope = (qx - px) / (qy - py)
+    y = ylo
+    while y <= yhi:
+        x = px + (y - py) * slope
+        xi = int(min(max(np.ceil(x), 0.0), w))
+        yi = int(y)
+        diff[yi, xi] += s
+        box[0], box[1] = min(box[0], yi), max(box[1], yi)
+        box[2], box[3] = min(box[2], xi), max(box[3], xi)
+        y += 1.0
+
+
+@njit(cache=True, nogil=True)
 def winding_fill(p, q, w, h):  # pragma: no cover - compiled
     """(h, w) bool pixels with a non-zero winding number of the directed segments p → q
-    ((E, 2) pixel coordinates each): every segment adds ±1 at the first pixel centre right
-    of its crossing of each row ``y`` (pixel centres at integer coordinates, rows ``lo ≤ y <
-    hi``), and a running sum along each row gives the winding number."""
+    ((E, 2) pixel coordinates each, added by :func:`scan_segment`)."""
     out = np.zeros((h, w), dtype=np.bool_)
     diff = np.zeros((h, w + 1), dtype=np.int32)
-    ya, yb, xa, xb = h, -1, w, -1
+    box = np.array([h, -1, w, -1])
     for e in range(p.shape[0]):
-        px, py, qx, qy = p[e, 0], p[e, 1], q[e, 0], q[e, 1]
-        ylo = max(np.ceil(min(py, qy)), 0.0)
-        yhi = min(np.ceil(max(py, qy)) - 1.0, h - 1.0)
-        if not np.isfinite(ylo + yhi) or yhi < ylo:
-            continue
-        s = 1 if qy > py else -1
-        slope = (qx - px) / (qy - py)
-        y = ylo
-        while y <= yhi:
-            x = px + (y - py) * slope
-            xi = int(min(max(np.ceil(x), 0.0), w))
-            yi = int(y)
-            diff[yi, xi] += s
-            ya, yb = min(ya, yi), max(yb, yi)
-            xa, xb = min(xa, xi), max(xb, xi)
-            y += 1.0
+        scan_segment(p[e, 0], p[e, 1], q[e, 0], q[e, 1], diff, box)
+    ya, yb, xa, xb = box[0], box[1], box[2], box[3]
     if yb < 0 or xa >= w:
         return out
     for yi in range(ya, yb + 1):

@@ -40,7 +40,8 @@ import numpy as np
 from scipy.optimize import least_squares
 from scipy.sparse import coo_matrix
 
-from calibration.camera import Camera, lens_distort, normalized_to_pixels
+from calibration.camera import Camera
+from calibration.distortion import lens_distort, normalized_to_pixels
 from calibration.rotation import matrix_to_rotvec, rotvec_to_matrix
 from calibration.detect import Detection
 from calibration.errors import CalibrationError

@@ -28,6 +28,8 @@ from calibration.distortion import (
     distort_normalized,
     fisheye_fold_angle,
     fisheye_theta,
+    lens_distort,
+    normalized_to_pixels,
     undistort_fisheye,
     undistort_normalized,
 )
@@ -88,23 +90,6 @@ def _check_points(X: Any, dim: int, what: str) -> tuple[np.ndarray, bool]:
     if arr.ndim != 2 or arr.shape[1] != dim:
         raise ValueError(f"{what}: expected shape (N, {dim}) or ({dim},), got {np.shape(X)}")
     return arr, single
-
-
-# --------------------------------------------------------------------------- pure projection math
-def lens_distort(xy: np.ndarray, dist: np.ndarray, model: str = "pinhole") -> np.ndarray:
-    """Ideal normalized coordinates (N, 2) → distorted ones through the lens ``model``
-    (:func:`distort_fisheye` for ``"fisheye"``, else :func:`distort_normalized`)."""
-    if model == "fisheye":
-        return distort_fisheye(xy, dist)
-    return distort_normalized(xy, dist)
-
-
-def normalized_to_pixels(xy: np.ndarray, K: np.ndarray) -> np.ndarray:
-    """Normalized coordinates (N, 2) → pixels (N, 2): ``u = fx x + s y + cx``, ``v = fy y + cy``
-    for ``K = [[fx, s, cx], [0, fy, cy], [0, 0, 1]]``."""
-    u = K[0, 0] * xy[:, 0] + K[0, 1] * xy[:, 1] + K[0, 2]
-    v = K[1, 1] * xy[:, 1] + K[1, 2]
-    return np.stack([u, v], axis=1)
 
 
 # --------------------------------------------------------------------------- Camera

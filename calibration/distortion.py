@@ -18,6 +18,8 @@ __all__ = [
     "distort_normalized",
     "fisheye_fold_angle",
     "fisheye_theta",
+    "lens_distort",
+    "normalized_to_pixels",
     "undistort_fisheye",
     "undistort_normalized",
 ]
@@ -225,3 +227,19 @@ def undistort_fisheye(xy_d: np.ndarray, k: np.ndarray) -> np.ndarray:
         scale = np.where(theta_d > 1e-8, np.tan(theta) / theta_d, 1.0)
         scale = np.where(theta < np.pi / 2, scale, np.nan)
     return xy_d * scale[:, None]
+
+
+def lens_distort(xy: np.ndarray, dist: np.ndarray, model: str = "pinhole") -> np.ndarray:
+    """Ideal normalized coordinates (N, 2) → distorted ones through the lens ``model``
+    (:func:`distort_fisheye` for ``"fisheye"``, else :func:`distort_normalized`)."""
+    if model == "fisheye":
+        return distort_fisheye(xy, dist)
+    return distort_normalized(xy, dist)
+
+
+def normalized_to_pixels(xy: np.ndarray, K: np.ndarray) -> np.ndarray:
+    """Normalized coordinates (N, 2) → pixels (N, 2): ``u = fx x + s y + cx``, ``v = fy y + cy``
+    for ``K = [[fx, s, cx], [0, fy, cy], [0, 0, 1]]``."""
+    u = K[0, 0] * xy[:, 0] + K[0, 1] * xy[:, 1] + K[0, 2]
+    v = K[1, 1] * xy[:, 1] + K[1, 2]
+    return np.stack([u, v], axis=1)

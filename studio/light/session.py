@@ -18,7 +18,7 @@ from studio.light.estimate import LightError, estimate_light
 from studio.render.lights import light_from_dict
 
 __all__ = ["BODY_SOURCES", "MAX_FRAMES", "estimate_session_light", "load_light", "session_bodies",
-           "session_shadows"]
+           "session_shadows", "spread_frames"]
 
 log = logging.getLogger(__name__)
 
@@ -27,7 +27,8 @@ BODY_SOURCES = ("fit", "truth")
 MAX_FRAMES = 10
 
 
-def _spread(frames: list[int], n: int) -> list[int]:
+def spread_frames(frames: list[int], n: int) -> list[int]:
+    """At most ``n`` of ``frames``, evenly spread over them (first and last kept)."""
     if len(frames) <= n:
         return list(frames)
     return [frames[int(i)] for i in np.round(np.linspace(0, len(frames) - 1, n)).astype(int)]
@@ -105,9 +106,9 @@ def estimate_session_light(ws, *, frames: list[int] | None = None, kind: str = "
         chosen, _ = session_bodies(ws, None, "fit") if ws.layout.fit_dir.is_dir() else (None, None)
         if chosen is None:
             raise LightError(f"{ws.path}: no fit/ folder — run `studio fit {ws.path}` first (or --bodies truth)")
-        frames = _spread(chosen, MAX_FRAMES)
+        frames = spread_frames(chosen, MAX_FRAMES)
     elif frames is None:
-        frames = _spread(ws.frame_indices, MAX_FRAMES)
+        frames = spread_frames(ws.frame_indices, MAX_FRAMES)
     frames = ws.check_frames(frames)
     ws.check_writable(ws.layout.light_dir)
     frames, body_list = session_bodies(ws, frames, bodies)

@@ -196,15 +196,13 @@ def _topology(F: np.ndarray, n_vertices: int) -> _Topology | None:
 def _pinhole_lens(camera) -> tuple | None:
     """(R, t, K, 12 distortion coefficients) of a pinhole ``camera`` without sensor tilt, for
     :func:`studio.render.winding.project_pinhole`; None for a fisheye or a tilted sensor."""
-    if camera.model != "pinhole":
+    from calibration.distortion import _padded
+
+    d = _padded(np.asarray(camera.dist, dtype=np.float64).ravel())
+    if camera.model != "pinhole" or d[12] != 0.0 or d[13] != 0.0:
         return None
-    dist = np.asarray(camera.dist, dtype=np.float64).ravel()
-    if len(dist) > 14 or np.any(dist[12:] != 0):
-        return None
-    d = np.zeros(12)
-    d[: min(len(dist), 12)] = dist[:12]
     return (np.asarray(camera.R, dtype=np.float64), np.asarray(camera.t, dtype=np.float64),
-            np.asarray(camera.K, dtype=np.float64), d)
+            np.asarray(camera.K, dtype=np.float64), d[:12].copy())
 
 
 def silhouettes_contour(cameras, vertices: np.ndarray, faces: np.ndarray, *,

@@ -252,10 +252,11 @@ def write_report(source, *, participant=None, pdf: bool = False, posterior: bool
     from studio.report.measurements import write_measurements
 
     t0 = time.perf_counter()
-    data = gather(source, participant, posterior=posterior)
     lay = _layout(source)
+    ws = _workspace(source, lay)  # opened once: the uncertainty and the light section both read the capture
+    data = gather(source if ws is None else ws, participant, posterior=posterior)
     write_measurements(lay, data.table, data.participant.to_json())
-    light, centres, shadows = _light_of(source, lay)
+    light, centres, shadows = _light_of(ws, lay)
     p = atomic_write_text(lay.report_html, page_html(data, max_overlay_frames=max_overlay_frames, light=light,
                                                      camera_centres=centres, shadows=shadows))
     if pdf:
@@ -266,13 +267,25 @@ def write_report(source, *, participant=None, pdf: bool = False, posterior: bool
     return p
 
 
-def _light_of(source, lay) -> tuple[dict | None, dict | None, list]:
+def _workspace(source, lay):
+    """The :class:`~studio.workspace.Workspace` of ``source``, or None when the capture cannot be
+    opened (the report then covers the fits alone; :func:`~studio.report.data.gather` says why)."""
+    from studio.workspace import Workspace
+
+    if isinstance(source, Workspace):
+        return source
+    try:
+        return Workspace.open(lay.source, out=lay.root)
+    except Exception:  # noqa: BLE001 - a report without the capture still reports the fits
+        return None
+
+
+def _light_of(ws, lay) -> tuple[dict | None, dict | None, list]:
     """``light/light.json`` (None when absent or unreadable: the report goes on without it), the
     calibrated camera centres {name: (x, y, z)} and the shadow overlays of two of its frames
-    (empty when the capture, its segmentation or the bodies cannot be read)."""
+    (empty when the capture ``ws`` (None: not readable), its segmentation or the bodies cannot be read)."""
     from studio.light import LightError, load_light
     from studio.report.shadows import shadow_overlays
-    from studio.workspace import Workspace
 
     try:
         lights, light = load_light(lay.light_json)
@@ -280,8 +293,10 @@ def _light_of(source, lay) -> tuple[dict | None, dict | None, list]:
         if lay.light_json.is_file():
             log.warning("report without the light: %s", exc)
         return None, None, []
+    if ws is None:
+        log.warning("report's light section without cameras or shadow overlays: the capture cannot be opened")
+        return light, None, []
     try:
-        ws = source if isinstance(source, Workspace) else Workspace.open(lay.source, out=lay.root)
         centres = {c.name: c.center.tolist() for c in ws.cameras}
     except Exception as exc:  # noqa: BLE001 - the cameras and overlays are decoration of the light section
         log.warning("report's light section without cameras or shadow overlays: %s", exc)

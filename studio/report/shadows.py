@@ -50,11 +50,11 @@ def shadow_overlays(ws, lights, light: dict, *, max_frames: int = 2) -> list[Sha
     the light was estimated from (``light["sources"]["bodies"]``: the fits or the truth),
     ``lights`` as :func:`studio.light.load_light` returns them, the calibration's ground."""
     from studio.fit import overlay_image
-    from studio.light.session import _spread, session_bodies
+    from studio.light.session import spread_frames, session_bodies
     from studio.render import silhouette
     from studio.render.shadow import shadow_silhouettes
 
-    frames = _spread([int(f) for f in light.get("frames", [])], max_frames)
+    frames = spread_frames([int(f) for f in light.get("frames", [])], max_frames)
     if not frames:
         return []
     source = (light.get("sources") or {}).get("bodies", "fit")

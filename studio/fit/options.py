@@ -1,0 +1,86 @@
+"""Settings of a single-frame fit (:class:`FitOptions`), with the measurements behind the defaults."""
+
+from __future__ import annotations
+
+from dataclasses import asdict, dataclass
+
+from studio.fit.errors import FitError
+
+__all__ = ["FitOptions"]
+
+
+@dataclass(frozen=True)
+class FitOptions:
+    """Settings of a single-frame fit (defaults: the ≤ 60 s budget on one core).
+
+    Defaults measured on the walk sample (``benchmarks/fit_accuracy.py``): with the contour
+    renderer a level-1 evaluation costs about what a level-2 one did, and searching at level 1
+    (forearms ~6 px wide instead of ~3) with 240 + 450 Nelder–Mead evaluations took the
+    stature error from −17.7 to −5.9 mm and the surface distance from 16.4 to 9.8 mm. Doubling the
+    full-resolution stage to 900 evaluations (it had not converged: cost 0.72 → 0.52) took the
+    silhouette precision / recall vs the true labels from 0.935 / 0.950 to 0.950 / 0.957, the
+    surface distance to 7.8 mm and the joint error from 24.4 to 20.2 mm (frames 0, 6, 12, 18).
+    Measured without gain: 15 free shape coefficients (24-frame walk: arm span error +31.8 →
+    +18.9 mm, but stature −8.8 → −10.5 mm, precision 0.965 → 0.962, joints 15.6 → 19.2 mm),
+    20 free shape coefficients (frame 0: precision 0.927 → 0.910), a
+    ">1/2" instead of "≥1/2" coarse observed mask (frame 0: 0.927 → 0.927), a root + shape
+    polish after the final stage (0.927 → 0.926). The shape prior (eq. 6.8) is flat within 3 σ
+    and the shape is bounded to ±3 σ, so ``prior_weight`` does not act on the shape.
+
+    ``levels``: (search, refine, final) pyramid levels. ``n_shape_free``: shape
+    coefficients optimised (by decreasing eigenvalue). ``fit_shape``: False holds the shape.
+    ``search_model``: the body the global particle filter scores — ``"cylinder"`` (the 15-cone
+    model of §4.8.1 sized from the starting shape) or ``"scape"``; the heading search, the
+    partitioned passes and Nelder–Mead always score SCAPE. ``limb_particles`` × ``limb_layers``:
+    the per-limb re-search after the middle-level Nelder–Mead (0 turns it off).
+    ``rival_heading``: also search from the opposite heading when fitting from the silhouettes.
+    Measured on the held-out pose benchmark (``benchmarks/pose_accuracy.py``, variant
+    ``no-rival``): without it a frame takes ~6 s less (of ~36 s), but walk frames went from
+    9.5 to 17.7 mm and runs from 10.2 to 13.1 mm median surface distance (a stride facing away
+    is the library's blind spot). Kept on: a six-posture dev set without strides had shown no
+    loss; the strides do.
+    ``find_support``: look for a prop under the searched body when it sits
+    (:mod:`studio.fit.props`); when one is found, the observed pixels under the seat are left
+    out of the observed-to-model term from the Nelder–Mead stages on (own-model seated body on
+    a stool: 15.6 mm surface distance with the stool fitted as body, 6.9 mm without; held out,
+    two seated frames: 16.3 → 12.5 mm median).
+    ``start``: how a frame fitted from its silhouettes starts — ``"library"`` (the lab posture
+    library matched to the silhouettes, :mod:`studio.fit.library`) or ``"stride"`` (12 headings
+    × standing / stride postures, :func:`studio.fit.init.initial_poses`).
+
+    Frames fitted alone from the silhouettes (walk, frames 0/6/12/18/21): with the cone search,
+    stride postures and the limb re-search the joint error was 17/13/29/29/21 mm; SCAPE search
+    with standing-only starts and no limb re-search gave 22/45/37/16/— mm (frame 6 fitted alone
+    had started 120° off: 241 mm), frame 12's right wrist 205 mm off before the limb re-search.
+    """
+
+    levels: tuple[int, int, int] = (1, 1, 0)
+    tau: float = 20.0
+    xi: float = 1.0
+    n_particles: int = 80
+    n_layers: int = 8
+    n_particles_tracking: int = 48
+    n_layers_tracking: int = 5
+    nm_evaluations: int = 240
+    final_evaluations: int = 900
+    partition_particles: int = 40
+    tracking_budget: float = 0.5
+    partition_layers: int = 4
+    limb_particles: int = 32
+    limb_layers: int = 4
+    rival_heading: bool = True
+    n_shape_free: int = 10
+    fit_shape: bool = True
+    prior_weight: float = 1.0
+    search_model: str = "cylinder"
+    start: str = "library"
+    find_support: bool = True
+
+    def __post_init__(self):
+        if self.search_model not in ("scape", "cylinder"):
+            raise FitError(f"search_model: expected 'scape' or 'cylinder', got {self.search_model!r}")
+        if self.start not in ("library", "stride"):
+            raise FitError(f"start: expected 'library' or 'stride', got {self.start!r}")
+
+    def to_dict(self) -> dict:
+        return {k: list(v) if isinstance(v, tuple) else v for k, v in asdict(self).items()}

@@ -155,3 +155,35 @@ def test_import_and_segment_the_person(uu, calibrated, capsys):
     assert main(["report", str(session)]) == 1  # nothing to measure, and it says why, not "run fit first"
     err = capsys.readouterr().err
     assert "quality gates refused every frame" in err and "frame 1 failed: cam1: 2 disconnected blobs" in err, err
+
+
+def test_compiled_voting_equals_the_remap_reference_on_the_footage(uu, calibrated):
+    """Shadow voting (§5.5.2) through the calibrated floor on real frames: the compiled path (shadow
+    pixels only) and the reference (``cv2.remap`` over the shadow boxes) give the same labels."""
+    import cv2
+
+    from studio.segment import BackgroundModel, ShadowVoter
+
+    root, tmp, _ = uu
+    voter = ShadowVoter(RigCalibration.load(tmp / "floor.json"), list(CAMS))
+
+    def read(path, start, n):
+        cap = cv2.VideoCapture(str(path))
+        cap.set(cv2.CAP_PROP_POS_FRAMES, start)
+        frames = [cv2.cvtColor(cap.read()[1], cv2.COLOR_BGR2RGB) for _ in range(n)]
+        cap.release()
+        return frames
+
+    models = {n: BackgroundModel.fit(read(root / n / "background.avi", 0, 4)) for n in CAMS}
+    frames = {n: read(root / n / "video.avi", 150, 2) for n in CAMS}
+    relabelled = 0
+    for i in range(2):
+        analysed = {n: models[n].analyse(frames[n][i]) for n in CAMS}
+        labels, ratios = {n: a[0] for n, a in analysed.items()}, {n: a[1] for n, a in analysed.items()}
+        for r in (None, ratios):
+            fast, ref = voter.vote(labels, r), voter.vote(labels, r, method="remap")
+            assert fast.relabelled == ref.relabelled and fast.iterations == ref.iterations
+            for n in CAMS:
+                np.testing.assert_array_equal(fast.labels[n], ref.labels[n])
+            relabelled += sum(fast.relabelled.values())
+    assert relabelled > 1000  # real floor shadows relabelled: the comparison is not between unchanged labels

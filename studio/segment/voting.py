@@ -139,7 +139,11 @@ class ShadowVoter:
         self._ratio_tolerance8 = int(round(self.ratio_tolerance * RATIO_SCALE))
         sizes = [int(np.prod(calibration[k].size)) for k in names]
         self._offsets = np.concatenate([[0], np.cumsum(sizes)]).astype(np.int64)
-        self._indices = {k: np.stack([self._flat_indices(k, j) for j in names if j != k]) for k in names}
+        self._indices = {}  # k → (H_k, W_k, J) int32: every other view's flat indices, interleaved per pixel
+        for k in names:
+            w, h = calibration[k].size
+            others = [self._flat_indices(k, j) for j in names if j != k]
+            self._indices[k] = np.stack(others, axis=-1) if others else np.empty((h, w, 0), np.int32)
 
     def _flat_indices(self, k: str, j: str) -> np.ndarray:
         """(H_k, W_k) int32: the map (k, j) as indices into the flat buffer of every view's
@@ -234,7 +238,8 @@ class ShadowVoter:
         return (own & (votes < self.min_votes) & ~hidden).view(np.uint8)
 
     def _relabel_remap(self, state, k: str, box) -> np.ndarray | None:
-        """Reference: (h, w) bool regions of unexplained shadow touching the person, or None."""
+        """Reference: flat indices into k's labels of the unexplained shadow regions touching the
+        person (connected components of the whole box), or None."""
         unexplained = self._unexplained_remap(state, k, box)
         if not unexplained.any():
             return None
@@ -252,10 +257,13 @@ class ShadowVoter:
         touching[np.unique(cc[(person > 0) & (unexplained > 0)])] = True
         touching[0] = False
         touching &= stats[:, cv2.CC_STAT_AREA] >= self.min_region
-        return touching[cc] if touching.any() else None
+        if not touching.any():
+            return None
+        rows, cols = np.nonzero(touching[cc])
+        return (rows + y) * lab.shape[1] + cols + x
 
     def _relabel_compiled(self, state, k: str, box) -> np.ndarray | None:
-        """The same regions as :meth:`_relabel_remap`, evaluated near the shadow of k only."""
+        """The same pixels as :meth:`_relabel_remap`, evaluated near the shadow of k only."""
         x, y, w, h = box
         lab = state.labels[k]
         use = state.ratios is not None
@@ -265,13 +273,13 @@ class ShadowVoter:
             near = cv2.dilate(near, self._kernel)  # the pixels whose votes reach a shadow pixel
         votes = consistent_shadow(self._indices[k], state.flat, state.flat_ratios, own_ratios, near, box, use,
                                   self._ratio_tolerance8)  # fmt: skip
-        if self.tolerance > 0:
-            for j in range(votes.shape[0]):
-                cv2.dilate(votes[j], self._kernel, dst=votes[j])
-        unexplained = unexplained_in_box(self._indices[k], state.flat, state.flat_ratios, lab, own_ratios, box, votes,
-                                         self.min_votes, use, self._ratio_tolerance8)  # fmt: skip
-        flip, count = touching_regions(unexplained, lab, box, self.min_region)
-        return flip if count else None
+        if self.tolerance > 0 and votes.shape[2]:
+            votes = cv2.dilate(votes, self._kernel)  # (h, w, J): every view's channel at once
+            votes = votes.reshape(h, w, -1)  # (OpenCV drops a single view's channel axis)
+        unexplained, positions = unexplained_in_box(self._indices[k], state.flat, state.flat_ratios, lab, own_ratios,
+                                                    box, votes, self.min_votes, use, self._ratio_tolerance8)  # fmt: skip
+        flip = touching_regions(unexplained, positions, lab, box, self.min_region) if len(positions) else positions
+        return flip if len(flip) else None
 
     # ------------------------------------------------------------------ voting
     def vote(
@@ -303,16 +311,14 @@ class ShadowVoter:
                 shadow = (state.labels[k] == SHADOW).view(np.uint8)
                 if not shadow.any():
                     continue
-                box = cv2.boundingRect(shadow)
-                flip = relabel(state, k, box)
+                flip = relabel(state, k, cv2.boundingRect(shadow))
                 if flip is not None:
-                    changes[k] = (box, flip)
+                    changes[k] = flip
             if not changes:
                 break
-            for k, (box, flip) in changes.items():
-                x, y, w, h = box
-                state.labels[k][y : y + h, x : x + w][flip] = PERSON
-                relabelled[k] += int(flip.sum())
+            for k, flip in changes.items():
+                state.labels[k].reshape(-1)[flip] = PERSON  # a view of the flat buffer
+                relabelled[k] += len(flip)
                 state.changed(k)
         else:
             log.warning("shadow voting did not converge in %d iterations", self.max_iterations)

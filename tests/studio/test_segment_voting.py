@@ -189,6 +189,20 @@ def test_compiled_voting_equals_the_remap_reference(scene, options):
     assert changed > 500  # the cases do relabel: the equality is not between unchanged inputs
 
 
+@pytest.mark.parametrize("cameras", [["cam1"], ["cam0", "cam2"]])
+def test_compiled_voting_equals_the_reference_with_one_or_two_views(scene, cameras):
+    """One view: no floor point is explained, every shadow region touching the person becomes person."""
+    sc, _, truth = scene
+    voter = ShadowVoter(sc.calibration, cameras)
+    labels = {c: truth[c] for c in cameras}
+    fast, ref = voter.vote(labels), voter.vote(labels, method="remap")
+    assert fast.relabelled == ref.relabelled and sum(fast.relabelled.values()) > 0
+    for c in cameras:
+        np.testing.assert_array_equal(fast.labels[c], ref.labels[c])
+    if len(cameras) == 1:
+        assert (fast.labels["cam1"] == SHADOW).sum() < 0.1 * (truth["cam1"] == SHADOW).sum()
+
+
 def test_vote_rejects_an_unknown_method(scene, voter):
     with pytest.raises(SegmentationError, match="method must be 'compiled' or 'remap', got 'fast'"):
         voter.vote(scene[2], method="fast")

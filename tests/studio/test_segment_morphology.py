@@ -1,9 +1,12 @@
 """Morphology (§5.5.1) on real frames: the box-filter median equals OpenCV's median filter bit for bit."""
 
+from itertools import islice
+
 import cv2
 import numpy as np
 import pytest
 
+from calibration.sampling import iter_video_frames
 from studio.segment import PERSON, SHADOW, BackgroundModel, Morphology, clean_labels
 from studio.segment import morphology as morph
 from studio.segment.morphology import binary_median
@@ -15,18 +18,10 @@ def raw_labels(shared_data):
     root = shared_data / "multiview" / "uu_infomcv_4cam_person"
     if not root.is_dir():
         pytest.skip(f"{root} not found")
-
-    def read(path, start, n):
-        cap = cv2.VideoCapture(str(path))
-        cap.set(cv2.CAP_PROP_POS_FRAMES, start)
-        frames = [cv2.cvtColor(cap.read()[1], cv2.COLOR_BGR2RGB) for _ in range(n)]
-        cap.release()
-        return frames
-
     out = []
     for cam in ("cam2", "cam3"):
-        model = BackgroundModel.fit(read(root / cam / "background.avi", 0, 4))
-        for frame in read(root / cam / "video.avi", 100, 3):
+        model = BackgroundModel.fit([f for _, f in islice(iter_video_frames(root / cam / "background.avi"), 4)])
+        for _, frame in islice(iter_video_frames(root / cam / "video.avi", step=50), 2, 5):  # frames 100, 150, 200
             out += [model.classify_raw(frame), model.apply(frame, clean=False)]
     return out
 

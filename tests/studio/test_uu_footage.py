@@ -160,22 +160,15 @@ def test_import_and_segment_the_person(uu, calibrated, capsys):
 def test_compiled_voting_equals_the_remap_reference_on_the_footage(uu, calibrated):
     """Shadow voting (§5.5.2) through the calibrated floor on real frames: the compiled path (shadow
     pixels only) and the reference (``cv2.remap`` over the shadow boxes) give the same labels."""
-    import cv2
-
+    from calibration.sampling import iter_video_frames
     from studio.segment import BackgroundModel, ShadowVoter
 
     root, tmp, _ = uu
     voter = ShadowVoter(RigCalibration.load(tmp / "floor.json"), list(CAMS))
-
-    def read(path, start, n):
-        cap = cv2.VideoCapture(str(path))
-        cap.set(cv2.CAP_PROP_POS_FRAMES, start)
-        frames = [cv2.cvtColor(cap.read()[1], cv2.COLOR_BGR2RGB) for _ in range(n)]
-        cap.release()
-        return frames
-
-    models = {n: BackgroundModel.fit(read(root / n / "background.avi", 0, 4)) for n in CAMS}
-    frames = {n: read(root / n / "video.avi", 150, 2) for n in CAMS}
+    models = {n: BackgroundModel.fit([f for _, f in itertools.islice(iter_video_frames(root / n / "background.avi"), 4)])
+              for n in CAMS}  # fmt: skip
+    frames = {n: [f for _, f in itertools.islice(iter_video_frames(root / n / "video.avi", step=50), 3, 5)]
+              for n in CAMS}  # frames 150 and 200  # fmt: skip
     relabelled = 0
     for i in range(2):
         analysed = {n: models[n].analyse(frames[n][i]) for n in CAMS}

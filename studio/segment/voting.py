@@ -299,7 +299,7 @@ class ShadowVoter:
 
         ``method``: ``"compiled"`` (default) evaluates the rule on the shadow pixels only
         (:mod:`studio.segment.voting_kernel`); ``"remap"`` warps whole bounding boxes with
-        ``cv2.remap`` — the reference, same labels bit for bit, ~5× slower.
+        ``cv2.remap`` — the reference, same labels bit for bit, ~4× slower.
         """
         if method not in ("compiled", "remap"):
             raise SegmentationError(f"shadow voting: method must be 'compiled' or 'remap', got {method!r}")

@@ -47,6 +47,7 @@ REPO = Path(__file__).resolve().parents[1]
 DATA = REPO.parent / "shared" / "data"
 RESULTS = REPO / "benchmarks" / "results" / "segmentation.json"
 
+from rigs.atomic import atomic_write_text  # noqa: E402
 from studio.segment import (  # noqa: E402
     PERSON,
     SHADOW,
@@ -348,8 +349,7 @@ def main(argv=None) -> int:
         from segmentation_speed import bench_throughput
 
         results["throughput"] = bench_throughput(DATA, args.quick)
-    RESULTS.parent.mkdir(parents=True, exist_ok=True)
-    RESULTS.write_text(json.dumps(results, indent=2, default=float) + "\n")
+    atomic_write_text(RESULTS, json.dumps(results, indent=2, default=float) + "\n", mkdir=True)
     print(f"\nwrote {RESULTS}")
     return 0
 

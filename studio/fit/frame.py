@@ -11,7 +11,10 @@
    visual hull (:mod:`studio.fit.init`), then (``start="library"``, the default) the lab
    posture library (:mod:`studio.fit.library`) matched over posture × stature × heading, its
    shortlist scored with SCAPE, the best 4 seeding the filter; the match's stature starts
-   the shape. ``start="stride"`` (the first wave's start, kept for comparison): 12 headings ×
+   the shape. With one view (§5.5) the library also searches the floor point along the
+   camera's line of sight (``MONOCULAR_DEPTHS``), sees the shadow camera when a light is known,
+   and its 120 best matches with the heading grid's strides are scored by the cost to choose
+   the starts. ``start="stride"`` (the first wave's start, kept for comparison): 12 headings ×
    standing / stride postures, the stature from the hull's top — an arms-overhead person
    started 339 mm (joint error) off and ended there, a squat 132 mm.
 3. The annealed particle filter (§4.7.3) searches the pose (shape held) at the coarse level on

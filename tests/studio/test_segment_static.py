@@ -38,7 +38,7 @@ def walk(t, lo=10, span=60, speed=2):
     return lo + (p if p < span else 2 * span - p)
 
 
-@pytest.fixture(scope="module")
+@pytest.fixture
 def scene():
     s = Scene()
     return s, BackgroundModel.fit([s.frame() for _ in range(8)])
@@ -65,8 +65,9 @@ def _run(scene, positions, box_from=None, box_until=10**9, settings=StaticSettin
 def test_a_box_put_down_while_the_person_moves_becomes_background_after_n_frames(scene):
     rows, det = _run(scene, [[(walk(t), 30)] for t in range(70)], box_from=10)
     assert [r[0] > 0.95 for r in rows[10:10 + N]] == [True] * N  # person-like while it is new
-    assert max(r[0] for r in rows[10 + N:]) == 0.0  # static from frame 10 + N on
-    assert rows[10 + N][2] >= 0.95 * 25 * 25
+    # static within N + N/10 frames (the components are checked every N/10 frames)
+    assert max(r[0] for r in rows[10 + N + N // 10:]) == 0.0
+    assert rows[10 + N + N // 10][2] >= 0.95 * 25 * 25
     assert min(min(r[1]) for r in rows) > 0.97  # the moving person is kept every frame
     assert det.layer[BOX].mean() > 0.95 and det.layer.sum() < 1.1 * 25 * 25
 
@@ -75,17 +76,21 @@ def test_a_person_who_stops_is_kept_however_long(scene):
     # walks for 15 frames, then stands still for 4 N frames: nothing else moves
     rows, det = _run(scene, [[(walk(min(t, 15)), 30)] for t in range(15 + 4 * N)])
     assert min(r[1][0] for r in rows) > 0.97 and max(r[2] for r in rows) == 0 and not det.layer.any()
-    # the guard is what keeps them: with a second person walking elsewhere the still one is absorbed
+    # the guard is what keeps them: without it (plain persistence, witness=0), or with a second person
+    # walking elsewhere, the still one is absorbed N frames after stopping
+    rows, _ = _run(scene, [[(walk(min(t, 15)), 30)] for t in range(15 + 4 * N)],
+                   settings=StaticSettings(frames=N, witness=0.0))
+    assert 15 + N <= next(t for t, r in enumerate(rows) if r[1][0] < 0.5) <= 15 + N + N // 10
     rows, _ = _run(scene, [[(walk(min(t, 15)), 30), (walk(t, lo=110, span=30), 20)] for t in range(15 + 4 * N)])
     first_static = next(t for t, r in enumerate(rows) if r[1][0] < 0.5)
-    assert 15 + N <= first_static <= 15 + N + 2 and min(r[1][1] for r in rows) > 0.97
+    assert 15 + N <= first_static <= 15 + N + N // 10 and min(r[1][1] for r in rows) > 0.97
 
 
 def test_a_person_in_front_of_the_static_box_is_person_and_a_removed_box_leaves_no_ghost(scene):
     # the box is put down at 5; the person walks right, crosses the box (110-135) around frame 50
     xs = [min(10 + max(t - 30, 0) * 4, 140) if t >= 30 else walk(t) for t in range(90)]
     rows, det = _run(scene, [[(x, 50)] for x in xs], box_from=5, box_until=80)
-    assert max(r[0] for r in rows[5 + N:30]) == 0.0  # static before the person reaches it
+    assert max(r[0] for r in rows[5 + N:30]) < 0.01  # static before the person reaches it
     crossing = [t for t in range(30, 80) if 110 <= xs[t] <= 119]
     assert crossing and min(rows[t][1][0] for t in crossing) > 0.95  # in front of the box: person
     assert max(r[0] for r in rows[5 + N:80]) < 0.03  # the uncovered rest stays static (morphology: edge px)

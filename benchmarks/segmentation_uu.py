@@ -215,8 +215,9 @@ def bench_uu_chair(data: Path, results_dir: Path, quick: bool, frames_static: in
     polygons given as the user's ignore regions. Per camera on frames 100/200/300/400: the share of chair
     pixels labelled person, the person's own pixels kept (person outside the chair polygons, against
     the plain labels; also for the polygons drawn 3 px wider, as a rough user drawing, and for the
-    detector without its guard, ``witness=0``: plain persistence), the share of chair and of the person's own pixels stationary for
-    ``frames_static`` frames, and CPU ms per frame of classify vs the detector. Picture:
+    detector without its guard, ``witness=0``: plain persistence), the share of chair and of the
+    person's own pixels stationary for ``frames_static`` frames, and CPU ms per frame of classify vs
+    the detector. Picture:
     ``segmentation_uu_chair.png`` (frame 200; columns plain | static | ignore; chair outline yellow)."""
     import json
     import time
@@ -265,7 +266,8 @@ def bench_uu_chair(data: Path, results_dir: Path, quick: bool, frames_static: in
                 n, cc, stats, _ = cv2.connectedComponentsWithStats(own.astype(np.uint8))
                 x, y, w, h = stats[1 + int(np.argmax(stats[1:, cv2.CC_STAT_AREA])), :4]
                 box = (max(x - 15, 0), max(y - 10, 0), w + 30, h + 20)
-                panels.append(np.hstack([_panel(video[i], variants[v], chair, box) for v in ("plain", "static", "ignore")]))
+                shown = ("plain", "static", "ignore")
+                panels.append(np.hstack([_panel(video[i], variants[v], chair, box) for v in shown]))
         rows[cam] = {k: float(np.mean(v)) for k, v in figs.items()}
         rows[cam].update({f"cpu ms {k}": 1000 * v / len(video) for k, v in cpu.items()}, frames=len(video),
                          chair_pixels=int(chair.sum()))  # fmt: skip
@@ -276,7 +278,8 @@ def bench_uu_chair(data: Path, results_dir: Path, quick: bool, frames_static: in
     write_image(picture, grid)
     print(f"   the chair (hand-drawn polygons, {CHAIR.name}): frames 100/200/300/400 after all {rows['cam1']['frames']} "
           f"frames in order; chair px labelled person | person's own px kept, for plain / static "
-          f"(N = {frames_static}) / ignore regions (the polygons, then drawn 3 px wider) / static without the moving-elsewhere guard; share stationary for N frames (chair, person); CPU ms/frame")  # fmt: skip
+          f"(N = {frames_static}) / ignore regions (the polygons, then drawn 3 px wider) / static without the "
+          "moving-elsewhere guard; share stationary for N frames (chair, person); CPU ms/frame")  # fmt: skip
     for cam, r in rows.items():
         cells = "  ".join(f"{v} {r[f'{v} chair as person']:.3f} | {r[f'{v} person kept']:.3f}"
                           for v in ("plain", "static", "ignore", "ignore +3 px", "no guard"))  # fmt: skip

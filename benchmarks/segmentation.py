@@ -342,7 +342,9 @@ def main(argv=None) -> int:
 
         results["uu_capture"] = bench_uu(DATA, RESULTS.parent, args.quick)
         if results["uu_capture"] is not None:
-            from segmentation_uu import bench_uu_pipeline
+            from segmentation_uu import bench_uu_chair, bench_uu_pipeline
+
+            results["uu_capture"]["chair"] = bench_uu_chair(DATA, RESULTS.parent, args.quick)
 
             results["uu_capture"]["pipeline"] = bench_uu_pipeline(DATA, args.quick)
     if "throughput" not in args.skip:

@@ -70,7 +70,7 @@ def _fit_one(job: dict) -> dict:
     extra = {}
     if job["lights"]:
         extra = {"lights": [light_from_dict(d) for d in job["lights"]], "shadow_masks": shadows,
-                 "ground": getattr(ws.calibration, "ground", None)}
+                 "ground": getattr(ws.calibration, "ground", None), "light_uncertainty": job.get("light_uncertainty")}
     t, c = time.perf_counter(), time.process_time()
     hint = None if job.get("hint_pose") is None else np.asarray(job["hint_pose"], float)
     fit = fit_frame(model, ws.cameras, masks, frame=f, options=FitOptions(**job["options"]), seed=job.get("seed", f),
@@ -106,14 +106,15 @@ def _fit_chain(jobs: list[dict], paths: list[str], first: str) -> list[dict]:
     return out
 
 
-def _estimated_light(ws, frames: list[int], rows: dict, labels: str, out: Path) -> list[dict]:
-    """The light estimated from the ``silhouette`` fits (cached in ``out``)."""
+def _estimated_light(ws, frames: list[int], rows: dict, labels: str, out: Path) -> tuple[list[dict], dict]:
+    """The light estimated from the ``silhouette`` fits (cached in ``out``) and its 95 % intervals."""
     from rigs.atomic import atomic_write_json
     from studio.body import BodyModel
-    from studio.light import estimate_light
+    from studio.light import estimate_light, light_uncertainty
 
     if out.is_file():
-        return json.loads(out.read_text())["lights"]
+        saved = json.loads(out.read_text())
+        return saved["lights"], light_uncertainty(saved["light"])
     bodies = []
     for f in frames:
         r = rows[("silhouette", f)]
@@ -123,7 +124,7 @@ def _estimated_light(ws, frames: list[int], rows: dict, labels: str, out: Path) 
                          ground=getattr(ws.calibration, "ground", None))
     lights = [{"type": "point", "position": light.position.tolist()} for light in est.lights]
     atomic_write_json(out, {"lights": lights, "light": est.to_json()})
-    return lights
+    return lights, light_uncertainty(est.to_json())
 
 
 def main(argv=None) -> int:
@@ -166,9 +167,10 @@ def main(argv=None) -> int:
     def path(variant, f):
         return folder / f"{variant}_{f:06d}.json"
 
-    def run(variant, lights):
+    def run(variant, lights, uncertainty=None):
         jobs = [{"session": str(session), "frame": f, "variant": variant, "sex": truth["sex"], "labels": args.labels,
-                 "options": options.to_dict(), "lights": lights} for f in frames if not path(variant, f).is_file()]
+                 "options": options.to_dict(), "lights": lights, "light_uncertainty": uncertainty}
+                for f in frames if not path(variant, f).is_file()]
         if not jobs:
             return
         with Progress() as bar, worker_pool(min(args.workers, len(jobs))) as pool:
@@ -199,12 +201,12 @@ def main(argv=None) -> int:
 
         rows = {(r["variant"], r["frame"]): r for r in (json.loads(path("silhouette", f).read_text()) for f in frames)}
         try:
-            lights = _estimated_light(ws, frames, rows, args.labels, folder / "light_estimated.json")
+            lights, uncertainty = _estimated_light(ws, frames, rows, args.labels, folder / "light_estimated.json")
         except LightError as exc:  # the silhouette-only bodies may be too wrong to explain any shadow
             light_note = f"light not estimated from the silhouette-only fits: {exc}"
             print(light_note)
         else:
-            run("shadow_estimated", lights)
+            run("shadow_estimated", lights, uncertainty)
             variants.append("shadow_estimated")
     rows = {(v, f): json.loads(path(v, f).read_text()) for v in variants for f in frames}
 

@@ -220,6 +220,7 @@ def fit_frame(
     shadow_masks=None,
     shadow_weight: float = 1.0,
     ground=None,
+    light_uncertainty: dict | None = None,
 ) -> FrameFit:
     """Fit ``model`` to one frame's observed silhouettes.
 
@@ -240,7 +241,8 @@ def fit_frame(
     With ``lights`` (known point / directional lights) and ``shadow_masks`` (observed shadows,
     (H, W) bool per camera), the cost gains the shadow term of eq. 5.7 (weight
     ``shadow_weight``, cast on ``ground``; :class:`studio.fit.shadows.ShadowTerm`), reported as
-    ``costs["shadow"]``.
+    ``costs["shadow"]``. ``light_uncertainty``: an estimated light's 95 % intervals
+    (:func:`studio.light.light_uncertainty`), for the screen's check of a one-view frame.
     """
     cameras = list(cameras)
     masks = [np.asarray(m, dtype=bool) for m in masks]
@@ -249,7 +251,8 @@ def fit_frame(
     for c, m in zip(cameras, masks, strict=True):
         if m.shape != (c.size[1], c.size[0]):
             raise FitError(f"camera {c.name}: mask is {m.shape[1]}x{m.shape[0]}, calibration says {c.size[0]}x{c.size[1]}")
-    screen = screen_masks(cameras, masks, shadow=bool(lights)) if screen is None else screen
+    if screen is None:
+        screen = screen_masks(cameras, masks, shadow=bool(lights), light=light_uncertainty)
     if screen["status"] == "failed":
         raise UnusableFrame(frame, refused_quality(screen))
     used = [i for i, c in enumerate(cameras) if c.name not in screen["dropped"]]
@@ -443,7 +446,7 @@ def fit_frame_gender(cameras, masks, gender: str = "auto", **kwargs) -> FrameFit
         return fit_frame(BodyModel.load(gender), cameras, masks, **kwargs)
     if kwargs.get("screen") is None:
         kwargs["screen"] = screen_masks(cameras, [np.asarray(m, dtype=bool) for m in masks],
-                                        shadow=bool(kwargs.get("lights")))
+                                        shadow=bool(kwargs.get("lights")), light=kwargs.get("light_uncertainty"))
     fits = [fit_frame(BodyModel.load(g), cameras, masks, **kwargs) for g in ("female", "male")]
     best = min(fits, key=lambda f: f.costs["total"])
     best.costs["gender_costs"] = {f.gender: f.costs["total"] for f in fits}

@@ -73,6 +73,11 @@ VIEW_AGREEMENT = 0.80
 SHAPE_BOUND_SIGMA = 2.9
 #: |z| against ANSUR II (suspect above, failed above)
 POPULATION_Z = (3.5, 5.0)
+#: a frame fitted from one view and its shadow takes its depth from the light: an estimated light
+#: whose 95 % interval is wider than this (direction in degrees, distance in percent either way)
+#: makes it suspect. The walk's light from 10 frames of 4 views: 2.0°, −10..+8 %; the monocular
+#: sample's light from its own silhouette-only fits: 7.1°, −21..+81 % (those fits: 110 mm off).
+LIGHT_CI = (3.0, 15.0)
 
 #: our measurement name → (ANSUR II column, factor to SI units)
 ANSUR_COLUMNS = {
@@ -229,7 +234,7 @@ def _hull_explained(cameras, masks, *, step: float = 0.03, factor: int = 4) -> l
     return out
 
 
-def screen_masks(cameras, masks, *, shadow: bool = False) -> dict:
+def screen_masks(cameras, masks, *, shadow: bool = False, light: dict | None = None) -> dict:
     """Segmentation sanity of one frame before fitting: ``{"views": {name: figures}, "reasons": [...],
     "status", "dropped": [names]}`` (see the module doc). ``cameras`` full-resolution, ``masks``
     (H, W) bool, same order.
@@ -239,7 +244,10 @@ def screen_masks(cameras, masks, *, shadow: bool = False) -> dict:
     alone leaves the depth along its rays unobserved: with ``shadow`` (a known light, the shadow
     term of eq. 5.7) the cast shadow is the second view (thesis §5.5, the shadow camera);
     without it a one-camera frame is fitted but ``suspect``, the reason naming the view, and a
-    rig left with one usable view is refused (``failed``: its segmentation failed).
+    rig left with one usable view is refused (``failed``: its segmentation failed). ``light``: the
+    estimated light's 95 % intervals (``{"direction_ci_deg", "distance_ci": [lo, hi] %}``, see
+    :func:`studio.light.light_uncertainty`; None: the light is known): one view with a light less
+    certain than :data:`LIGHT_CI` is ``suspect``, the shadow's depth no better than the light.
     """
     from studio.fit.errors import FitError
 
@@ -286,6 +294,8 @@ def screen_masks(cameras, masks, *, shadow: bool = False) -> dict:
         reasons.append(Reason("views", "suspect", f"one usable view ({name}) and no shadow term: the depth along "
                               "its rays is unobserved (a second camera or a light's shadow fixes it)", name))
     else:
+        if len(used) == 1 and light is not None:
+            reasons += _light_reasons(light, cameras[used[0]].name)
         cams, ms = [cameras[i] for i in used], [masks[i] for i in used]
         try:
             explained = _hull_explained(cams, ms)
@@ -301,6 +311,17 @@ def screen_masks(cameras, masks, *, shadow: bool = False) -> dict:
     out = [r.to_json() for r in reasons]
     return {"views": views, "reasons": out, "status": status_of(out), "dropped": dropped,
             **({"shadow_view": True} if shadow and len(used) == 1 else {})}
+
+
+def _light_reasons(light: dict, name: str) -> list[Reason]:
+    """A reason when the light that gives one view its depth is too uncertain (:data:`LIGHT_CI`)."""
+    direction = float(light.get("direction_ci_deg") or 0.0)
+    lo, hi = light.get("distance_ci") or (0.0, 0.0)
+    if direction <= LIGHT_CI[0] and max(-float(lo), float(hi)) <= LIGHT_CI[1]:
+        return []
+    return [Reason("light", "suspect", f"one view ({name}): its depth comes from the shadow, and the light is "
+                   f"uncertain (95 % interval: direction {direction:.1f}°, distance {float(lo):+.0f}..{float(hi):+.0f} %; "
+                   f"within {LIGHT_CI[0]:.0f}° and ±{LIGHT_CI[1]:.0f} % expected)", name)]
 
 
 def refused_quality(screen: dict) -> dict:

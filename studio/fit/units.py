@@ -104,7 +104,7 @@ def _shadow_inputs(ws, frame: int, shadows: dict | None) -> dict:
     floor refined from the shadows, when ``light.json`` holds one)."""
     if not shadows:
         return {}
-    from studio.light import LightError, load_light
+    from studio.light import LightError, light_uncertainty, load_light
 
     try:
         lights, light = load_light(ws.layout.light_json)
@@ -117,7 +117,8 @@ def _shadow_inputs(ws, frame: int, shadows: dict | None) -> dict:
         n = np.asarray(light["floor"]["normal"], float)
         ground = GroundPlane(n / np.linalg.norm(n), float(light["floor"]["offset"]))
     return {"lights": lights, "shadow_masks": [ws.labels(c, frame) == 2 for c in ws.camera_names],
-            "shadow_weight": float(shadows.get("weight", 1.0)), "ground": ground}
+            "shadow_weight": float(shadows.get("weight", 1.0)), "ground": ground,
+            "light_uncertainty": light_uncertainty(light)}
 
 
 def fit_unit(spec: dict, frame: int, previous: dict | None) -> dict:
@@ -148,7 +149,7 @@ def fit_unit(spec: dict, frame: int, previous: dict | None) -> dict:
     pose = None if prev.get("pose") is None else np.asarray(prev["pose"], float)
     gender = prev.get("gender") or spec["gender"]
     extra = _shadow_inputs(ws, frame, spec.get("shadows"))
-    screen = screen_masks(cameras, masks, shadow=bool(extra.get("lights")))
+    screen = screen_masks(cameras, masks, shadow=bool(extra.get("lights")), light=extra.get("light_uncertainty"))
     try:
         if pose is None:  # the chain's first fitted frame: from the silhouettes, shape free
             fit = fit_frame_gender(cameras, masks, gender, frame=frame, options=options, seed=seed, screen=screen,

@@ -8,7 +8,7 @@ posterior); :func:`estimate_session_light` does it for a session and writes ``li
 
 from studio.light.estimate import LightError, LightEstimate, estimate_light
 from studio.light.objective import ShadowFrame, ShadowObjective, predicted_shadows
-from studio.light.session import estimate_session_light, load_light
+from studio.light.session import estimate_session_light, light_uncertainty, load_light
 
 __all__ = ["LightError", "LightEstimate", "ShadowFrame", "ShadowObjective", "estimate_light",
-           "estimate_session_light", "load_light", "predicted_shadows"]
+           "estimate_session_light", "light_uncertainty", "load_light", "predicted_shadows"]

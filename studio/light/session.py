@@ -156,3 +156,15 @@ def load_light(source) -> tuple[list, dict]:
     if not lights:
         raise LightError(f"{path}: field 'lights': expected at least one light")
     return lights, obj
+
+
+def light_uncertainty(obj: dict) -> dict:
+    """The widest 95 % intervals over the lights of a ``light.json`` (or
+    :meth:`~studio.light.LightEstimate.to_json`) object: ``{"direction_ci_deg", "distance_ci":
+    [lo, hi] % or None}`` (None for directional lights) — what
+    :func:`studio.fit.quality.screen_masks` asks of a light that gives one view its depth."""
+    entries = obj.get("lights") or [obj]
+    direction = max(float(e.get("direction_ci_deg") or 0.0) for e in entries)
+    spans = [e["distance_ci"] for e in entries if e.get("distance_ci") is not None]
+    distance = [min(float(s[0]) for s in spans), max(float(s[1]) for s in spans)] if spans else None
+    return {"direction_ci_deg": direction, "distance_ci": distance}

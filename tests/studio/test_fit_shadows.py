@@ -152,3 +152,33 @@ def test_one_view_library_finds_the_depth_from_the_shadow():
     dark = library_match(model, [cam], [lab == 1], floor, shortlist=8)
     assert lit["scores"][0] > dark["scores"][0]  # the shadow views add their own distance
 
+
+
+def test_one_view_with_an_uncertain_light_is_suspect(scene):
+    """A one-view frame takes its depth from the shadow: an estimated light whose 95 % interval
+    is wide (the monocular sample's own estimate: 7.1°, −21..+81 %) makes the frame suspect, the
+    reason naming the view and the figures; a light as certain as the walk's (2.0°, −10..+8 %),
+    or a known light, does not; several views never ask."""
+    from studio.fit.quality import screen_masks
+    from studio.light import light_uncertainty
+
+    model, cams, pose, labels = scene
+    sil = [labels[0] == 1]
+    wide = light_uncertainty({"direction_ci_deg": 7.1, "distance_ci": [-20.7, 81.0]})
+    assert wide == {"direction_ci_deg": 7.1, "distance_ci": [-20.7, 81.0]}
+    screen = screen_masks(cams[:1], sil, shadow=True, light=wide)
+    (reason,) = [r for r in screen["reasons"] if r["check"] == "light"]
+    assert screen["status"] == "suspect" and reason["severity"] == "suspect" and reason["view"] == "cam0"
+    assert "direction 7.1°, distance -21..+81 %" in reason["message"]
+    tight = {"direction_ci_deg": 2.0, "distance_ci": [-10.0, 8.0]}
+    for light in (tight, None):
+        assert not [r for r in screen_masks(cams[:1], sil, shadow=True, light=light)["reasons"] if r["check"] == "light"]
+    far = {"direction_ci_deg": 2.0, "distance_ci": [-16.0, 8.0]}  # the distance alone
+    assert [r["check"] for r in screen_masks(cams[:1], sil, shadow=True, light=far)["reasons"]] == ["light"]
+    both = screen_masks(cams, [lab == 1 for lab in labels], shadow=True, light=wide)
+    assert not [r for r in both["reasons"] if r["check"] == "light"]
+    # two lights: the widest of their intervals; a directional light has no distance
+    two = light_uncertainty({"lights": [{"direction_ci_deg": 1.0, "distance_ci": [-3.0, 20.0]},
+                                        {"direction_ci_deg": 4.0, "distance_ci": [-9.0, 2.0]}]})
+    assert two == {"direction_ci_deg": 4.0, "distance_ci": [-9.0, 20.0]}
+    assert light_uncertainty({"lights": [{"direction_ci_deg": 0.5}]}) == {"direction_ci_deg": 0.5, "distance_ci": None}

@@ -83,7 +83,8 @@ class FrameObjective:
         poses = self.model.clip_pose(poses)
         out = np.empty((len(poses), self.model.n_vertices, 3))
         for i in range(0, len(poses), BATCH):
-            out[i : i + BATCH] = self.model.vertices_batch(shapes[i : i + BATCH], poses[i : i + BATCH])
+            out[i : i + BATCH] = self.model.vertices_batch(shapes[i : i + BATCH], poses[i : i + BATCH],
+                                                           free_shape=self.n_shape_free)
         return out
 
     def masks(self, vertices: np.ndarray, level: int) -> list[np.ndarray]:

@@ -19,7 +19,7 @@ from pathlib import Path
 
 import numpy as np
 
-from studio.body import posed, scape, skeleton
+from studio.body import kinematics, posed, scape, skeleton
 from studio.body.skeleton import PART_NAMES, PART_PARENTS, POSE_SIZE
 from studio.body.storage import dequantize_blocks
 
@@ -264,10 +264,9 @@ class BodyModel:
     def _posed_edges(self, shapes: np.ndarray, poses: np.ndarray, use_q: bool = True,
                      free: int | None = None) -> np.ndarray:
         """Target edges R·D·Q·v (eq. 3.11), planar (B, 3, 2, F) float32 (:mod:`studio.body.posed`)."""
-        G = self.part_rotations(poses)  # (B, 15, 3, 3)
+        G, rv = kinematics.chain_rotations(poses, self.hinge_axes)  # (B, 15, 3, 3), (B, 15, 3)
         D = self._shape_gradients(shapes, free)
-        rv = skeleton.joint_rotvecs(G).astype(np.float32)
-        return posed.posed_edges(rv, self._Qc if use_q else self._Q_rigid, self.joint_pairs, D,
+        return posed.posed_edges(rv.astype(np.float32), self._Qc if use_q else self._Q_rigid, self.joint_pairs, D,
                                  G.astype(np.float32), self.face_parts)
 
     def _generate(self, shapes: np.ndarray, poses: np.ndarray, use_q: bool = True,

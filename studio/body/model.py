@@ -100,6 +100,10 @@ class BodyModel:
         rigid[:, 6] = self._edges
         self._Q_rigid = rigid
         self._Qc = rigid if self.Q_coef is None else posed.compact_q(self.Q_coef, self._edges)
+        self._Qp, self._Qp_rigid = posed.planar_q(self._Qc), posed.planar_q(rigid)  # faces last, for the kernel
+        self._part_start = np.searchsorted(self.face_parts, np.arange(len(PART_NAMES) + 1)).astype(np.int64)
+        if self.face_parts.min() < 0 or self._part_start[-1] != F:
+            raise BodyModelError(f"face_parts must lie in 0..{len(PART_NAMES) - 1}")
         self._D_cache: tuple[bytes, np.ndarray] | None = None
         self._D_base: tuple[tuple, np.ndarray] | None = None
         self._solver = scape.PoissonSolver(self.faces, V)
@@ -266,8 +270,8 @@ class BodyModel:
         """Target edges R·D·Q·v (eq. 3.11), planar (B, 3, 2, F) float32 (:mod:`studio.body.posed`)."""
         G, rv = kinematics.chain_rotations(poses, self.hinge_axes)  # (B, 15, 3, 3), (B, 15, 3)
         D = self._shape_gradients(shapes, free)
-        return posed.posed_edges(rv.astype(np.float32), self._Qc if use_q else self._Q_rigid, self.joint_pairs, D,
-                                 G.astype(np.float32), self.face_parts)
+        return posed.posed_edges_planar(rv.astype(np.float32), self._Qp if use_q else self._Qp_rigid,
+                                        self.joint_pairs, D, G.astype(np.float32), self._part_start)
 
     def _generate(self, shapes: np.ndarray, poses: np.ndarray, use_q: bool = True,
                   free: int | None = None) -> np.ndarray:

@@ -294,3 +294,31 @@ def test_free_shape_hint_equals_the_full_shape_deformation():
     mixed = np.array(model._shape_gradients(shapes, 5))
     model._D_cache = None
     np.testing.assert_array_equal(mixed, np.array(model._shape_gradients(shapes)))
+
+
+@pytest.mark.parametrize("n_bodies", [1, 16])
+def test_planar_posed_edges_equal_the_per_face_kernel_bit_for_bit(n_bodies):
+    """The model's kernel (maps faces last, part by part, blocks shared by the batch) gives
+    the per-face kernel's float32 edges exactly, with one shared or one D per body."""
+    from studio.body import posed
+    from studio.body.kinematics import chain_rotations
+
+    model = BodyModel.load("female")
+    rng = np.random.default_rng(n_bodies)
+    shapes = rng.normal(size=(n_bodies, model.n_shape)) * np.sqrt(model.eigenvalues)
+    poses = model.clip_pose(rng.normal(size=(n_bodies, POSE_SIZE)) * 0.5)
+    G, rv = chain_rotations(poses, model.hinge_axes)
+    rv, G = rv.astype(np.float32), G.astype(np.float32)
+    for D in (model._shape_gradients(shapes), model._shape_gradients(shapes[:1])):
+        want = posed.posed_edges(rv, model._Qc, model.joint_pairs, D, G, model.face_parts)
+        got = posed.posed_edges_planar(rv, posed.planar_q(model._Qc), model.joint_pairs, D, G, model._part_start)
+        assert np.abs(want).max() > 0.01
+        np.testing.assert_array_equal(got, want)
+
+
+def test_face_parts_out_of_range_are_rejected():
+    assert cube_model(face_parts=np.full(12, 14))._part_start[-2:].tolist() == [0, 12]
+    with pytest.raises(BodyModelError, match=r"face_parts must lie in 0\.\.14"):
+        cube_model(face_parts=np.full(12, 15))
+    with pytest.raises(BodyModelError, match=r"face_parts must lie in 0\.\.14"):
+        cube_model(face_parts=np.full(12, -1))

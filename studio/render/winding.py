@@ -150,43 +150,35 @@ def project_pinhole(V, idx, R, t, K, d):  # pragma: no cover - compiled
 
 
 @njit(cache=True, nogil=True)
-def contour_silhouette(facing, u, v, f_uv, f_vu, V, R, t, K, d, w, h, near):  # pragma: no cover - compiled
+def contour_silhouette(facing, u, v, f_uv, f_vu, V, R, t, K, d, w, h, near, diff):  # pragma: no cover - compiled
     """One view's silhouette in one pass: :func:`contour_edges` of the view's ``facing``
     column, its vertices by :func:`project_pinhole`, then :func:`winding_fill` — the same
-    arithmetic, without the arrays passed between them; the difference image is cleared only
-    over the contour's bounding box. → ((h, w) bool, ok); ``ok`` False (an empty mask) when a
-    contour vertex is within ``near`` of the camera plane (the caller falls back)."""
+    arithmetic, without the arrays passed between them. ``diff`` (h, w + 1) int32 is the
+    difference image, all zeros on entry and left so (only the cells written are cleared:
+    a fresh full-size one per view cost more than the fill). → ((h, w) bool, ok); ``ok``
+    False (an empty mask) when a contour vertex is within ``near`` of the camera plane (the
+    caller falls back)."""
     start, end, used = contour_edges(facing, u, v, f_uv, f_vu, V.shape[0])
     out = np.zeros((h, w), dtype=np.bool_)
     uv = np.empty((V.shape[0], 2))
     zmin = np.inf
-    xmin, xmax, ymin, ymax = np.inf, -np.inf, np.inf, -np.inf
     for i in used:
         px, py, z = _pinhole_pixel(V[i, 0], V[i, 1], V[i, 2], R, t, K, d)
         uv[i, 0], uv[i, 1] = px, py
         zmin = min(zmin, z)
-        xmin, xmax, ymin, ymax = min(xmin, px), max(xmax, px), min(ymin, py), max(ymax, py)
-    if used.shape[0] == 0:
-        return out, True
-    if zmin <= near:
+    if used.shape[0] and zmin <= near:
         return out, False
-    diff = np.empty((h, w + 1), dtype=np.int32)
-    if np.isfinite(xmin + xmax + ymin + ymax):  # rows and columns scan_segment can touch, with a margin
-        r0, r1 = int(max(np.floor(ymin) - 1.0, 0.0)), int(min(np.ceil(ymax) + 1.0, h - 1.0))
-        c0, c1 = int(max(np.floor(xmin) - 1.0, 0.0)), int(min(np.ceil(xmax) + 1.0, float(w)))
-        diff[r0:r1 + 1, c0:c1 + 1] = 0
-    else:
-        diff[:] = 0
     box = np.array([h, -1, w, -1])
     for e in range(start.shape[0]):
         a, b = start[e], end[e]
         scan_segment(uv[a, 0], uv[a, 1], uv[b, 0], uv[b, 1], diff, box)
     ya, yb, xa, xb = box[0], box[1], box[2], box[3]
-    if yb < 0 or xa >= w:
+    if yb < 0:
         return out, True
     for yi in range(ya, yb + 1):
         acc = 0
         for xi in range(xa, min(xb, w)):
             acc += diff[yi, xi]
             out[yi, xi] = acc != 0
+        diff[yi, xa:xb + 1] = 0
     return out, True

@@ -180,5 +180,9 @@ def test_renderer_one_pass_per_view_equals_the_composed_kernels(body, level):
         assert sum(int(w.sum()) for w in want) > 1000 >> (2 * level)
         for g, w in zip(got, want, strict=True):
             np.testing.assert_array_equal(g, w)
+        assert not any(d.any() for d in renderer._diffs)  # the difference images are left clean
+    with renderer._lock:  # another thread renders: this call uses fresh difference images
+        for g, w in zip(renderer(meshes[0]), _composed(cams, meshes[0], model.faces), strict=True):
+            np.testing.assert_array_equal(g, w)
     with pytest.raises(ValueError, match="vertices"):
         renderer(meshes[0][:-1])

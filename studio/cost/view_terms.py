@@ -9,7 +9,9 @@ beyond the window). Here one compiled pass does it all, and the exact Euclidean 
 taken only where it is read, by the separable form of the transform (Felzenszwalb–
 Huttenlocher): the horizontal distance ``g`` of every pixel of the box's rows to the model in
 its row, then ``d² = min_r' (r − r')² + g(r', c)²`` over the rows within τ, the search
-stopping once ``(r − r')²`` alone passes the best so far. The distances are OpenCV's
+stopping once ``(r − r')²`` alone passes the best so far; the model's box is found 8 pixels
+at a time. The 4 views of the walk frame 12 body (CPU, same run): 2.05 → 0.54 ms at full
+resolution, 0.62 → 0.14 ms at level 1. The distances are OpenCV's
 (``DIST_MASK_PRECISE`` is exact) and truncated the same way in float32; only the order of the
 float64 sums differs (tests/studio/test_cost_view_terms.py: 1e-12 relative).
 """
@@ -23,13 +25,61 @@ from numba import njit
 
 __all__ = ["view_numerators"]
 
+_NO_WORDS = np.empty((0, 0), np.uint64)
+
 
 @njit(cache=True, nogil=True)
-def _numerators(model, observed, dist_obs, tau, m, r0, r1, c0, c1):  # pragma: no cover - compiled
-    """(forward, backward, |F^e|, observed pixels in the window) of one view with the model's
-    bounding box rows [r0, r1), columns [c0, c1); see :func:`view_numerators`. ``m = ceil(τ)``,
-    ``tau`` in level pixels."""
+def _bbox(model, words):  # pragma: no cover - compiled
+    """Rows [r0, r1) and columns [c0, c1) of the True pixels of ``model`` (r1 = 0: none).
+    ``words``: the same memory as (H, W / 8) uint64 (W a multiple of 8, C order), scanned 8
+    pixels at a time; an empty (0, 0) array: pixel by pixel."""
     h, w = model.shape
+    r0, r1 = h, 0
+    if words.shape[0] == h:
+        nw = words.shape[1]
+        for r in range(h):
+            for j in range(nw):
+                if words[r, j] != 0:
+                    if r < r0:
+                        r0 = r
+                    r1 = r + 1
+                    break
+        if r1 == 0:
+            return 0, 0, 0, 0
+        acc = np.zeros(nw, np.uint64)
+        for r in range(r0, r1):
+            for j in range(nw):
+                acc[j] |= words[r, j]
+        c0, c1 = w, 0
+        for j in range(nw):
+            if acc[j] != 0:
+                for i in range(8):  # little-endian: byte i is pixel 8j + i
+                    if model.shape[1] > 8 * j + i and (acc[j] >> np.uint64(8 * i)) & np.uint64(0xFF):
+                        c0 = min(c0, 8 * j + i)
+                        c1 = max(c1, 8 * j + i + 1)
+        return r0, r1, c0, c1
+    c0, c1 = w, 0
+    for r in range(h):
+        for c in range(w):
+            if model[r, c]:
+                if r < r0:
+                    r0 = r
+                r1 = r + 1
+                c0 = min(c0, c)
+                c1 = max(c1, c + 1)
+    if r1 == 0:
+        return 0, 0, 0, 0
+    return r0, r1, c0, c1
+
+
+@njit(cache=True, nogil=True)
+def _numerators(model, words, observed, dist_obs, tau, m):  # pragma: no cover - compiled
+    """(forward, backward, |F^e|, observed pixels in the window) of one view (``words``: see
+    :func:`_bbox`); see :func:`view_numerators`. ``m = ceil(τ)``, ``tau`` in level pixels."""
+    h, w = model.shape
+    r0, r1, c0, c1 = _bbox(model, words)
+    if r1 == 0:
+        return 0.0, 0.0, 0, 0
     # d(F^e, F^o): C^τ(F^o) summed over the model's pixels
     forward = 0.0
     n_model = 0
@@ -101,12 +151,10 @@ def view_numerators(model: np.ndarray, observed: np.ndarray, dist_obs: np.ndarra
     ``(Σ_{F^e} C^τ(F^o), Σ_{F^o} C^τ(F^e), |F^e|)``; an empty model gives
     ``(0, τ·|F^o|, 0)``.
     """
-    rows = np.flatnonzero(model.any(axis=1))  # the box in NumPy: its SIMD scan beats a compiled loop
-    if rows.size == 0:
+    h, w = model.shape
+    words = model.view(np.uint64) if w % 8 == 0 and model.flags.c_contiguous else _NO_WORDS
+    forward, backward, n_model, n_inside = _numerators(model, words, observed, dist_obs, float(tau),
+                                                       int(math.ceil(tau)))
+    if n_model == 0:
         return 0.0, tau * n_observed, 0
-    r0, r1 = int(rows[0]), int(rows[-1]) + 1
-    cols = np.flatnonzero(model[r0:r1].any(axis=0))
-    m = int(math.ceil(tau))
-    forward, backward, n_model, n_inside = _numerators(model, observed, dist_obs, float(tau), m, r0, r1,
-                                                       int(cols[0]), int(cols[-1]) + 1)
     return forward, tau * (n_observed - n_inside) + backward, int(n_model)

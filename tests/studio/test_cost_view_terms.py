@@ -110,3 +110,22 @@ def test_other_distance_masks_keep_the_reference_path():
     exact = SilhouetteTarget.build([observed], tau=9.0)
     assert S._score_view(exact, 0, model) != S._score_view_reference(target, 0, model)
     assert math.isfinite(S._score_view(exact, 0, model)[1])
+
+
+def test_box_by_words_equals_box_by_pixels():
+    """The model's box scanned 8 pixels at a time (width a multiple of 8) equals the
+    pixel-by-pixel scan, for masks whose extreme pixels sit at every byte of a word."""
+    from studio.cost.view_terms import _NO_WORDS, _bbox
+
+    rng = np.random.default_rng(4)
+    for _ in range(200):
+        mask = np.zeros((int(rng.integers(1, 30)), 8 * int(rng.integers(1, 12))), bool)
+        for _ in range(int(rng.integers(0, 4))):
+            mask[rng.integers(0, mask.shape[0]), rng.integers(0, mask.shape[1])] = True
+        got = _bbox(mask, mask.view(np.uint64))
+        assert got == _bbox(mask, _NO_WORDS)
+        if mask.any():
+            rows, cols = np.flatnonzero(mask.any(axis=1)), np.flatnonzero(mask.any(axis=0))
+            assert got == (rows[0], rows[-1] + 1, cols[0], cols[-1] + 1)
+        else:
+            assert got == (0, 0, 0, 0)

@@ -112,7 +112,7 @@ class BodyModel:
         Dall = np.concatenate([self._Dm[None], self._Db]).astype(np.float64).reshape(K + 1, 3, 3, F)
         w0 = np.moveaxis(self._Qc[:, 6], 0, -1).astype(np.float64)  # (3, 2, F): Q·v at the rest pose
         E = np.einsum("bijf,jkf->bikf", Dall, w0)
-        sol = self._solver.solve_planar(E)
+        sol = self._solver.solve_planar_reference(E)  # once per model: the previous releases' basis, bit for bit
         self._rest_mean = sol[0] - sol[0][self._pelvis_idx].mean(axis=0)
         self._rest_basis = (sol[1:] - sol[1:, self._pelvis_idx].mean(axis=1, keepdims=True)).reshape(K, -1)
         # lowest vertices of the rest pose (candidates for the floor contact)
@@ -266,17 +266,25 @@ class BodyModel:
         return cached[1]
 
     def _posed_edges(self, shapes: np.ndarray, poses: np.ndarray, use_q: bool = True,
-                     free: int | None = None) -> np.ndarray:
-        """Target edges R·D·Q·v (eq. 3.11), planar (B, 3, 2, F) float32 (:mod:`studio.body.posed`)."""
-        G, rv = kinematics.chain_rotations(poses, self.hinge_axes)  # (B, 15, 3, 3), (B, 15, 3)
+                     free: int | None = None, reference: bool = False) -> np.ndarray:
+        """Target edges R·D·Q·v (eq. 3.11), planar (B, 3, 2, F) float32 (:mod:`studio.body.posed`);
+        the rotations by the compiled chain (:mod:`studio.body.kinematics`), or with
+        ``reference`` by SciPy (:func:`studio.body.skeleton.part_rotations`)."""
+        if reference:
+            G = self.part_rotations(poses)  # (B, 15, 3, 3)
+            rv = skeleton.joint_rotvecs(G)
+        else:
+            G, rv = kinematics.chain_rotations(poses, self.hinge_axes)  # (B, 15, 3, 3), (B, 15, 3)
         D = self._shape_gradients(shapes, free)
         return posed.posed_edges_planar(rv.astype(np.float32), self._Qp if use_q else self._Qp_rigid,
                                         self.joint_pairs, D, G.astype(np.float32), self._part_start)
 
     def _generate(self, shapes: np.ndarray, poses: np.ndarray, use_q: bool = True,
-                  free: int | None = None) -> np.ndarray:
-        e = self._posed_edges(shapes, poses, use_q=use_q, free=free)
-        Y = self._solver.solve_planar(e)
+                  free: int | None = None, reference: bool = False) -> np.ndarray:
+        """Meshes (B, V, 3) (eq. 3.23): the compiled rotations and solve, or with ``reference``
+        SciPy's (the path of the releases before: the same meshes to the last bit)."""
+        e = self._posed_edges(shapes, poses, use_q=use_q, free=free, reference=reference)
+        Y = self._solver.solve_planar_reference(e) if reference else self._solver.solve_planar(e)
         c = Y[:, self._pelvis_idx].mean(axis=1)  # (B, 3)
         target = poses[:, :3].copy()
         target[:, 2] += self._anchor(shapes)
@@ -284,10 +292,15 @@ class BodyModel:
 
     # ------------------------------------------------------------------ public evaluation
     def vertices(self, shape, pose=None, *, use_q: bool = True) -> np.ndarray:
-        """Mesh (V, 3) of one body (eq. 3.23). ``pose`` defaults to :meth:`default_pose`."""
+        """Mesh (V, 3) of one body (eq. 3.23). ``pose`` defaults to :meth:`default_pose`.
+
+        One body, off the fitter's hot path: SciPy's rotations and SuperLU's solve, so the
+        meshes that size the search cones, measure and report a body are the previous
+        releases' to the last bit (the compiled path of :meth:`vertices_batch` agrees to
+        1e-12 m, but a cone's radius depended on the rounding of its tip vertex: 0.2 mm)."""
         s = self.check_shape(shape)
         p = self.check_pose(self.default_pose() if pose is None else pose)
-        return self._generate(s[None], p[None], use_q=use_q)[0]
+        return self._generate(s[None], p[None], use_q=use_q, reference=True)[0]
 
     def vertices_batch(self, shapes, poses, *, use_q: bool = True, free_shape: int | None = None) -> np.ndarray:
         """Meshes (B, V, 3) of B bodies, one factored system, 3B right-hand sides.

@@ -80,6 +80,21 @@ def planar_q(C: np.ndarray) -> np.ndarray:
 _BLOCK = 512
 
 
+@njit(cache=True, nogil=True, inline="always")
+def _qv(Cp, i, k, f, x0, x1, x2, x3, x4, x5):  # pragma: no cover - compiled
+    """Row ``i`` of edge ``k`` of ``Q_f·v_f`` (eq. 3.16): the 7 regressors summed in
+    :func:`posed_edges`' order (the constant's coefficient last)."""
+    w = np.float32(0.0)
+    w += x0 * Cp[0, i, k, f]
+    w += x1 * Cp[1, i, k, f]
+    w += x2 * Cp[2, i, k, f]
+    w += x3 * Cp[3, i, k, f]
+    w += x4 * Cp[4, i, k, f]
+    w += x5 * Cp[5, i, k, f]
+    w += np.float32(1.0) * Cp[6, i, k, f]
+    return w
+
+
 @njit(cache=True, nogil=True)
 def posed_edges_planar(rotvecs, Cp, joint_pairs, D, G, part_start):  # pragma: no cover - compiled
     """:func:`posed_edges` with the edge map faces last (``Cp`` from :func:`planar_q`) and the
@@ -98,7 +113,6 @@ def posed_edges_planar(rotvecs, Cp, joint_pairs, D, G, part_start):  # pragma: n
             for c in range(3):
                 X[b, c, f] = rotvecs[b, j0, c]
                 X[b, 3 + c, f] = rotvecs[b, j1, c]
-    one = np.float32(1.0)
     for p in range(part_start.shape[0] - 1):
         for f0 in range(part_start[p], part_start[p + 1], _BLOCK):
             f1 = min(f0 + _BLOCK, part_start[p + 1])
@@ -111,31 +125,9 @@ def posed_edges_planar(rotvecs, Cp, joint_pairs, D, G, part_start):  # pragma: n
                     x0, x1, x2 = X[b, 0, f], X[b, 1, f], X[b, 2, f]
                     x3, x4, x5 = X[b, 3, f], X[b, 4, f], X[b, 5, f]
                     for k in range(2):
-                        # w = Q·v (eq. 3.16), summed over the 7 regressors in posed_edges' order
-                        w0 = np.float32(0.0)
-                        w0 += x0 * Cp[0, 0, k, f]
-                        w0 += x1 * Cp[1, 0, k, f]
-                        w0 += x2 * Cp[2, 0, k, f]
-                        w0 += x3 * Cp[3, 0, k, f]
-                        w0 += x4 * Cp[4, 0, k, f]
-                        w0 += x5 * Cp[5, 0, k, f]
-                        w0 += one * Cp[6, 0, k, f]
-                        w1 = np.float32(0.0)
-                        w1 += x0 * Cp[0, 1, k, f]
-                        w1 += x1 * Cp[1, 1, k, f]
-                        w1 += x2 * Cp[2, 1, k, f]
-                        w1 += x3 * Cp[3, 1, k, f]
-                        w1 += x4 * Cp[4, 1, k, f]
-                        w1 += x5 * Cp[5, 1, k, f]
-                        w1 += one * Cp[6, 1, k, f]
-                        w2 = np.float32(0.0)
-                        w2 += x0 * Cp[0, 2, k, f]
-                        w2 += x1 * Cp[1, 2, k, f]
-                        w2 += x2 * Cp[2, 2, k, f]
-                        w2 += x3 * Cp[3, 2, k, f]
-                        w2 += x4 * Cp[4, 2, k, f]
-                        w2 += x5 * Cp[5, 2, k, f]
-                        w2 += one * Cp[6, 2, k, f]
+                        w0 = _qv(Cp, 0, k, f, x0, x1, x2, x3, x4, x5)
+                        w1 = _qv(Cp, 1, k, f, x0, x1, x2, x3, x4, x5)
+                        w2 = _qv(Cp, 2, k, f, x0, x1, x2, x3, x4, x5)
                         u0 = D[bd, 0, 0, f] * w0 + D[bd, 0, 1, f] * w1 + D[bd, 0, 2, f] * w2
                         u1 = D[bd, 1, 0, f] * w0 + D[bd, 1, 1, f] * w1 + D[bd, 1, 2, f] * w2
                         u2 = D[bd, 2, 0, f] * w0 + D[bd, 2, 1, f] * w1 + D[bd, 2, 2, f] * w2

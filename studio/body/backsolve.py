@@ -65,6 +65,17 @@ class TriangularFactors:
         return z[self.perm_c]
 
 
+@njit(cache=True, nogil=True, inline="always")
+def _eliminate3(ptr, idx, val, j, z, z0, z1, z2):  # pragma: no cover - compiled
+    """``z[i] -= a · (z0, z1, z2)`` for every entry (i, a) of factor column ``j`` (K = 3)."""
+    for p in range(ptr[j], ptr[j + 1]):
+        i = idx[p]
+        a = val[p]
+        z[i, 0] -= a * z0
+        z[i, 1] -= a * z1
+        z[i, 2] -= a * z2
+
+
 @njit(cache=True, nogil=True)
 def _lu_solve_rows(l_ptr, l_idx, l_val, u_ptr, u_idx, u_val, u_diag, z):  # pragma: no cover - compiled
     """In place: ``z ← U⁻¹ L⁻¹ z`` for (n, K) ``z``, every right-hand side of a row at once
@@ -88,23 +99,12 @@ def _lu_solve_rows(l_ptr, l_idx, l_val, u_ptr, u_idx, u_val, u_diag, z):  # prag
                     z[i, c] -= a * z[j, c]
         return
     for j in range(n):
-        z0, z1, z2 = z[j, 0], z[j, 1], z[j, 2]
-        for p in range(l_ptr[j], l_ptr[j + 1]):
-            i = l_idx[p]
-            a = l_val[p]
-            z[i, 0] -= a * z0
-            z[i, 1] -= a * z1
-            z[i, 2] -= a * z2
+        _eliminate3(l_ptr, l_idx, l_val, j, z, z[j, 0], z[j, 1], z[j, 2])
     for j in range(n - 1, -1, -1):
         d = u_diag[j]
         z0, z1, z2 = z[j, 0] / d, z[j, 1] / d, z[j, 2] / d
         z[j, 0], z[j, 1], z[j, 2] = z0, z1, z2
-        for p in range(u_ptr[j], u_ptr[j + 1]):
-            i = u_idx[p]
-            a = u_val[p]
-            z[i, 0] -= a * z0
-            z[i, 1] -= a * z1
-            z[i, 2] -= a * z2
+        _eliminate3(u_ptr, u_idx, u_val, j, z, z0, z1, z2)
 
 
 @njit(cache=True, nogil=True)

@@ -81,7 +81,8 @@ def _fit_one(job: dict) -> dict:
             "per_joint_mm": np.round(1000 * per_joint, 1).tolist(), "root_error_mm": float(1000 * per_joint[0]),
             "status": fit.quality["status"], "reasons": [r["message"] for r in fit.quality["reasons"]],
             "costs": {k: v for k, v in fit.costs.items() if isinstance(v, float)},
-            "time_s": time.perf_counter() - t, "cpu_s": time.process_time() - c,
+            "time_s": time.perf_counter() - t, "cpu_s": time.process_time() - c, "timings": fit.timings,
+            "start_family": fit.costs.get("start_family"),
             "shape": fit.shape.tolist(), "pose": fit.pose.tolist(), "lights": job["lights"]}
 
 

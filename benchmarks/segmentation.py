@@ -47,6 +47,7 @@ REPO = Path(__file__).resolve().parents[1]
 DATA = REPO.parent / "shared" / "data"
 RESULTS = REPO / "benchmarks" / "results" / "segmentation.json"
 
+from rigs.atomic import atomic_write_text  # noqa: E402
 from studio.segment import (  # noqa: E402
     PERSON,
     SHADOW,
@@ -341,15 +342,16 @@ def main(argv=None) -> int:
 
         results["uu_capture"] = bench_uu(DATA, RESULTS.parent, args.quick)
         if results["uu_capture"] is not None:
-            from segmentation_uu import bench_uu_pipeline
+            from segmentation_uu import bench_uu_chair, bench_uu_pipeline
+
+            results["uu_capture"]["chair"] = bench_uu_chair(DATA, RESULTS.parent, args.quick)
 
             results["uu_capture"]["pipeline"] = bench_uu_pipeline(DATA, args.quick)
     if "throughput" not in args.skip:
         from segmentation_speed import bench_throughput
 
         results["throughput"] = bench_throughput(DATA, args.quick)
-    RESULTS.parent.mkdir(parents=True, exist_ok=True)
-    RESULTS.write_text(json.dumps(results, indent=2, default=float) + "\n")
+    atomic_write_text(RESULTS, json.dumps(results, indent=2, default=float) + "\n", mkdir=True)
     print(f"\nwrote {RESULTS}")
     return 0
 

@@ -11,7 +11,10 @@
    visual hull (:mod:`studio.fit.init`), then (``start="library"``, the default) the lab
    posture library (:mod:`studio.fit.library`) matched over posture × stature × heading, its
    shortlist scored with SCAPE, the best 4 seeding the filter; the match's stature starts
-   the shape. ``start="stride"`` (the first wave's start, kept for comparison): 12 headings ×
+   the shape. With one view (§5.5) the library also searches the floor point along the
+   camera's line of sight (``MONOCULAR_DEPTHS``), sees the shadow camera when a light is known,
+   and its 120 best matches with the heading grid's strides are scored by the cost to choose
+   the starts. ``start="stride"`` (the first wave's start, kept for comparison): 12 headings ×
    standing / stride postures, the stature from the hull's top — an arms-overhead person
    started 339 mm (joint error) off and ended there, a squat 132 mm.
 3. The annealed particle filter (§4.7.3) searches the pose (shape held) at the coarse level on
@@ -67,6 +70,13 @@ log = logging.getLogger(__name__)
 #: mean joint error 144 → 77 mm, frames within 40 mm 2 → 3, +6 % CPU).
 MONOCULAR_PARTICLES = 2
 MONOCULAR_LAYERS = 2
+#: A frame fitted from one view scores this many of the library's best matches (and the heading
+#: grid's strides) by its silhouette and shadow cost to choose its starts: with one view the
+#: descriptor ranks the true family anywhere in the first 70 (12 with several views).
+MONOCULAR_SHORTLIST = 120
+#: ... and searches the floor point along the camera's line of sight by these offsets (m) from
+#: the point under the silhouette's feet (:func:`studio.fit.init.feet_on_floor`).
+MONOCULAR_DEPTHS = (-0.3, -0.2, -0.1, 0.0, 0.1, 0.2, 0.3)
 
 
 @dataclass(frozen=True, eq=False)
@@ -250,7 +260,7 @@ def fit_frame(
 
         if shadow_masks is None or len(shadow_masks) != len(used) + len(screen["dropped"]):
             raise FitError("shadow_masks: one observed shadow mask per camera is needed with lights")
-        shadow = ShadowTerm.build(lights, [shadow_masks[i] for i in used], [c.name for c in cameras], options.levels,
+        shadow = ShadowTerm.build(lights, cameras, [shadow_masks[i] for i in used], options.levels,
                                   tau=options.tau, xi=options.xi, ground=ground, weight=shadow_weight)
     rng = np.random.default_rng(seed)
     t_start, cpu_start = time.perf_counter(), time.process_time()
@@ -260,7 +270,15 @@ def fit_frame(
     match = None
     if previous_pose is None and options.start == "library":
         # the lab posture library matched to the silhouettes: postures, headings and stature
-        match = library_match(model, cameras, masks, xy, shape=shape)
+        views = None if shadow is None else {"lights": shadow.lights, "masks": [shadow_masks[i] for i in used],
+                                             "ground": ground, "weight": shadow_weight}
+        floor = xy
+        if len(cameras) == 1:  # one view leaves the depth along its rays open: the library searches it
+            axis = xy - np.asarray(cameras[0].center, dtype=np.float64)[:2]
+            floor = xy + np.outer(MONOCULAR_DEPTHS, axis / np.linalg.norm(axis))
+        match = library_match(model, cameras, masks, floor, shape=shape, shadows=views,
+                              shortlist=12 if len(cameras) > 1 else MONOCULAR_SHORTLIST)
+        xy = match["xy"]
     if shape is not None:
         base_shape = model.check_shape(shape)
     elif options.fit_shape and model.measurement_samples is not None:
@@ -292,8 +310,11 @@ def fit_frame(
         if match is not None:  # the library's shortlist, scored by the silhouette cost (eq. 4.6)
             cand = stand_on_floor(model, base_shape, match["poses"])
             X = np.stack([pose_obj.pack(base_shape, p) for p in cand])
+            families = list(match["families"])
+            if len(cameras) == 1:  # one view: the heading grid's strides compete with the library's postures
+                X, families = np.vstack([X, grid]), families + ["stride"] * len(grid)
             order = np.argsort(pose_obj(X, search))[:4]
-            starts, start_family = X[order], match["families"][order[0]]
+            starts, start_family = X[order], families[order[0]]
         if hint_pose is not None:
             hint = np.asarray(hint_pose, dtype=np.float64).copy()
             hint[:2] = starts[0, :2]

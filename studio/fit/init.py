@@ -62,14 +62,16 @@ def hull_centroid(cameras, masks, *, extent: float = 3.5, step: float = 0.04,
 
 
 def feet_on_floor(camera, mask: np.ndarray, *, share: float = 0.03, sole: float = 0.04) -> np.ndarray:
-    """Floor (x, y) (2,) under the feet seen by one camera: the mean of the silhouette's lowest
-    rows (``share`` of its height) back-projected onto the plane ``z = sole`` (a foot's centre
-    height). The monocular start: a camera looking down sees the feet lowest in the image."""
+    """Floor (x, y) (2,) under the feet seen by one camera: the pixel at the mean row of the
+    silhouette's lowest rows (``share`` of its height) and its mean column (the body's centre:
+    the lowest pixels of a stride are one foot's, ~0.3 m from the pelvis) back-projected onto the
+    plane ``z = sole`` (a foot's centre height). The monocular start: a camera looking down sees
+    the feet lowest in the image."""
     ys, xs = np.nonzero(np.asarray(mask, bool))
     if len(ys) == 0:
         raise FitError(f"camera {camera.name}: empty silhouette, no feet to put on the floor")
     low = ys >= ys.max() - max(1.0, share * (ys.max() - ys.min()))
-    origin, d = camera.pixel_rays(np.array([[xs[low].mean(), ys[low].mean()]]))
+    origin, d = camera.pixel_rays(np.array([[xs.mean(), ys[low].mean()]]))
     if d[0, 2] >= -1e-6:
         raise FitError(f"camera {camera.name}: the feet's ray does not meet the floor (camera looking up?)")
     return (origin[0] + d[0] * (sole - origin[0, 2]) / d[0, 2])[:2]

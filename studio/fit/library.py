@@ -124,7 +124,8 @@ def _pinhole(cam, factor: int):
     return K, cam.R.astype(np.float64), cam.t.astype(np.float64).ravel(), (-(-w // factor), -(-h // factor))
 
 
-def library_scores(points: np.ndarray, cameras, masks, yaws: np.ndarray, xy, *, factor: int = 8) -> np.ndarray:
+def library_scores(points: np.ndarray, cameras, masks, yaws: np.ndarray, xy, *, factor: int = 8,
+                   shadows: dict | None = None) -> np.ndarray:
     """Descriptor distance (P, H) of every library body × heading to the observed silhouettes.
 
     ``points`` (P, M, 3): vertex subsamples of the library bodies, standing on the floor,
@@ -134,27 +135,62 @@ def library_scores(points: np.ndarray, cameras, masks, yaws: np.ndarray, xy, *, 
     share of silhouette cells no point lands in; summed over the views (0 = perfect,
     2 × views = nothing in common). The loops are compiled (:func:`_scores`): 10,080
     candidates × 1,200 points × 4 views take ~0.75 s CPU (400 points: ~0.3 s; ~6 s in NumPy).
+
+    ``shadows`` (``{"lights", "masks", "ground", "weight"}``: known lights, the observed shadow
+    per camera, the floor plane (None: z = 0), the shadow term's weight) adds the shadow camera
+    of §5.5 as more views, one per camera and light: the points' shadows on the floor (eq. 5.2)
+    seen by the camera (eq. 5.3), inside when they land on the shadow or on the person (who
+    hides part of it, §5.6), the shadow's cells to reach; each weighs ``weight / cameras`` as
+    in eq. 5.7 (the views of the one shadow camera averaged).
     """
-    pins = [_pinhole(cam, factor) for cam in cameras]
-    coarse = [pool_any(mask, factor) for mask in masks]
+    from studio.render.lights import DirectionalLight, PointLight
+    from studio.render.shadow import _plane
+
+    masks = [np.asarray(m, bool) for m in masks]
+    # views: (camera, cells inside, cells to reach, light kind, light, weight)
+    views = [(k, m, m, 0.0, np.zeros(3), 1.0) for k, m in enumerate(masks)]
+    plane = np.zeros(4)
+    if shadows:
+        plane = np.append(*_plane(shadows.get("ground")))
+        weight = float(shadows.get("weight", 1.0)) / len(masks)
+        for light in shadows["lights"]:
+            if isinstance(light, PointLight):
+                row, kind = light.position, 1.0
+            elif isinstance(light, DirectionalLight):
+                row, kind = light.direction, 2.0
+                if float(plane[:3] @ light.direction) >= -1e-12:
+                    raise ValueError("shadows: a directional light shining upwards casts no floor shadow")
+            else:
+                raise TypeError(f"light: expected PointLight or DirectionalLight, got {type(light).__name__}")
+            views += [(k, np.asarray(sm, bool) | m, np.asarray(sm, bool), kind, row, weight)
+                      for k, (m, sm) in enumerate(zip(masks, shadows["masks"], strict=True))]
+    pins = [_pinhole(cameras[k], factor) for k, *_ in views]
+    inside = [pool_any(v[1], factor) for v in views]
+    wanted = [pool_any(v[2], factor) for v in views]
     sizes = np.array([size for *_, size in pins], dtype=np.int64)
     offsets = np.concatenate([[0], np.cumsum(sizes[:, 0] * sizes[:, 1])])
+    lights = np.stack([np.append(v[4], v[3]) for v in views])
     return _scores(np.ascontiguousarray(points, dtype=np.float64), np.asarray(yaws, dtype=np.float64),
                    np.asarray(xy, dtype=np.float64), np.stack([p[0] for p in pins]),
                    np.stack([p[1] for p in pins]), np.stack([p[2] for p in pins]), sizes, offsets,
-                   np.concatenate([c.ravel() for c in coarse]),
-                   np.array([max(int(c.sum()), 1) for c in coarse], dtype=np.float64))
+                   np.concatenate([c.ravel() for c in inside]), np.concatenate([c.ravel() for c in wanted]),
+                   np.array([max(int(c.sum()), 1) for c in wanted], dtype=np.float64), lights, plane,
+                   np.array([v[5] for v in views], dtype=np.float64))
 
 
 @njit(cache=True, nogil=True)
-def _scores(points, yaws, xy, Ks, Rs, ts, sizes, offsets, coarse, n_cells):  # pragma: no cover - compiled
+def _scores(points, yaws, xy, Ks, Rs, ts, sizes, offsets, inside, wanted, n_cells, lights, plane,
+            weights):  # pragma: no cover - compiled
     """The loops of :func:`library_scores` over bodies × headings, points and views; a cell
-    is counted once per candidate by stamping it with the candidate's number."""
+    is counted once per candidate by stamping it with the candidate's number. View k sees the
+    points themselves (``lights[k, 3]`` 0), or their shadows on ``plane`` [n, d] (n·X = d)
+    through a point light at ``lights[k, :3]`` (1) or a directional light shining along it (2)."""
     P, M, _ = points.shape
     H = len(yaws)
     C = len(Ks)
+    nx, ny, nz, d = plane[0], plane[1], plane[2], plane[3]
     score = np.zeros((P, H))
-    stamp = np.full(len(coarse), -1, dtype=np.int64)
+    stamp = np.full(len(inside), -1, dtype=np.int64)
     outside = np.zeros(C)
     reached = np.zeros(C)
     for p in range(P):
@@ -165,12 +201,28 @@ def _scores(points, yaws, xy, Ks, Rs, ts, sizes, offsets, coarse, n_cells):  # p
             reached[:] = 0.0
             for m in range(M):
                 x0, y0, z0 = points[p, m, 0], points[p, m, 1], points[p, m, 2]
-                wx, wy = c * x0 - s * y0 + xy[0], s * x0 + c * y0 + xy[1]
+                px, py = c * x0 - s * y0 + xy[0], s * x0 + c * y0 + xy[1]
                 for k in range(C):
+                    wx, wy, wz = px, py, z0
+                    kind = lights[k, 3]
+                    if kind > 0.5:  # the point's shadow on the floor (eq. 5.2)
+                        lx, ly, lz = lights[k, 0], lights[k, 1], lights[k, 2]
+                        if kind < 1.5:
+                            rx, ry, rz = wx - lx, wy - ly, wz - lz
+                            den = rx * nx + ry * ny + rz * nz
+                            hl = lx * nx + ly * ny + lz * nz - d
+                            if not (den < -1e-12 and wx * nx + wy * ny + wz * nz - d < hl):
+                                outside[k] += 1
+                                continue
+                            lam = -hl / den
+                            wx, wy, wz = lx + lam * rx, ly + lam * ry, lz + lam * rz
+                        else:
+                            t = (wx * nx + wy * ny + wz * nz - d) / (lx * nx + ly * ny + lz * nz)
+                            wx, wy, wz = wx - t * lx, wy - t * ly, wz - t * lz
                     R, t, K = Rs[k], ts[k], Ks[k]
-                    cx = R[0, 0] * wx + R[0, 1] * wy + R[0, 2] * z0 + t[0]
-                    cy = R[1, 0] * wx + R[1, 1] * wy + R[1, 2] * z0 + t[1]
-                    cz = R[2, 0] * wx + R[2, 1] * wy + R[2, 2] * z0 + t[2]
+                    cx = R[0, 0] * wx + R[0, 1] * wy + R[0, 2] * wz + t[0]
+                    cy = R[1, 0] * wx + R[1, 1] * wy + R[1, 2] * wz + t[1]
+                    cz = R[2, 0] * wx + R[2, 1] * wy + R[2, 2] * wz + t[2]
                     if cz <= 0:
                         outside[k] += 1
                         continue
@@ -180,13 +232,13 @@ def _scores(points, yaws, xy, Ks, Rs, ts, sizes, offsets, coarse, n_cells):  # p
                         outside[k] += 1
                         continue
                     cell = offsets[k] + int(v) * sizes[k, 0] + int(u)
-                    if not coarse[cell]:
+                    if not inside[cell]:
                         outside[k] += 1
-                    elif stamp[cell] != cand:
+                    elif wanted[cell] and stamp[cell] != cand:
                         stamp[cell] = cand
                         reached[k] += 1
             for k in range(C):
-                score[p, h] += outside[k] / M + 1.0 - reached[k] / n_cells[k]
+                score[p, h] += weights[k] * (outside[k] / M + 1.0 - reached[k] / n_cells[k])
     return score
 
 
@@ -215,19 +267,24 @@ def _library_bodies(model, shape, library, n_points: int):
 
 def library_match(model, cameras, masks, xy, *, shape=None, scales=SCALES, n_headings: int = 12,
                   shortlist: int = 12, n_points: int = 1200, factor: int = 8,
-                  library: tuple[np.ndarray, list[str]] | None = None) -> dict:
+                  library: tuple[np.ndarray, list[str]] | None = None, shadows: dict | None = None) -> dict:
     """The library postures best matching the silhouettes (:func:`library_scores`), searched
     over posture × stature scale × heading with the bodies of ``shape`` (default: the mean).
 
+    ``xy`` the floor point (2,) the bodies' centroids stand over, or several (F, 2) searched too
+    (one view leaves the depth along its rays open).
+
     Returns ``{"poses": (shortlist, POSE_SIZE) with the heading and the floor point set (root
-    height 0: see :func:`stand_on_floor`), "families", "scales", "scores", "stature"}`` best
-    first; ``stature`` (m) is the best candidate's scale × the library body's stature.
+    height 0: see :func:`stand_on_floor`), "families", "scales", "scores", "stature", "xy"}``
+    best first; ``stature`` (m) is the best candidate's scale × the library body's stature,
+    ``xy`` its floor point.
 
     ``n_points`` vertices per body: with 400 the "silhouette cells no point reaches" share was
     mostly sampling noise. Measured on the *dev* people of ``benchmarks/pose_accuracy.py``
     (16 frames, 13 families; never the held-out ones): the true family first 50 % → 75 % of
     frames, among the 4 starts 62 → 81 %, in the shortlist 75 → 94 % (2,400 points: no better;
-    ``factor`` 6 or 12: worse or no better).
+    ``factor`` 6 or 12: worse or no better). ``shadows``: the shadow camera's views
+    (:func:`library_scores`), for a frame fitted with its shadow.
     """
     from calibration.rotation import matrix_to_rotvec, rotvec_to_matrix
 
@@ -244,19 +301,22 @@ def library_match(model, cameras, masks, xy, *, shape=None, scales=SCALES, n_hea
     scales = np.asarray(scales, dtype=np.float64)
     pts = (pts[:, None] * scales[None, :, None, None]).reshape(-1, n_points, 3)  # (P*S, M, 3)
     yaws = np.linspace(-np.pi, np.pi, n_headings, endpoint=False)
-    scores = library_scores(pts, cameras, masks, yaws, xy, factor=factor)  # (P*S, H)
+    xys = np.atleast_2d(np.asarray(xy, dtype=np.float64))
+    scores = np.stack([library_scores(pts, cameras, masks, yaws, q, factor=factor, shadows=shadows)
+                       for q in xys])  # (floor points, P*S, H)
     order = np.argsort(scores, axis=None)[:shortlist]
-    ps_idx, h_idx = np.unravel_index(order, scores.shape)
+    x_idx, ps_idx, h_idx = np.unravel_index(order, scores.shape)
     p_idx, s_idx = np.divmod(ps_idx, len(scales))
     out = []
-    for p, s, h in zip(p_idx, s_idx, h_idx, strict=True):
+    for q, p, s, h in zip(x_idx, p_idx, s_idx, h_idx, strict=True):
         pose = poses[p].copy()
         Rz = rotvec_to_matrix(np.array([0.0, 0.0, yaws[h]]))
         pose[3:6] = matrix_to_rotvec(Rz @ rotvec_to_matrix(pose[3:6]))  # turns about the pelvis
-        pose[:2] = np.asarray(xy) + (Rz[:2, :2] @ pelvis[p]) * scales[s]
+        pose[:2] = xys[q] + (Rz[:2, :2] @ pelvis[p]) * scales[s]
         out.append(pose)
     return {"poses": np.asarray(out), "families": [names[p] for p in p_idx], "scales": scales[s_idx].tolist(),
-            "scores": scores[ps_idx, h_idx].tolist(), "stature": float(scales[s_idx[0]] * stature)}
+            "scores": scores[x_idx, ps_idx, h_idx].tolist(), "stature": float(scales[s_idx[0]] * stature),
+            "xy": xys[x_idx[0]].copy()}
 
 
 def stand_on_floor(model, shape, poses: np.ndarray) -> np.ndarray:

@@ -30,7 +30,8 @@ from studio.render.pyramid import level_camera
 from studio.render.shadow import join_outlines, shadow_outline, shadow_silhouettes
 from studio.render.spans import _topology, face_normals, silhouettes_contour
 
-__all__ = ["ShadowFrame", "ShadowObjective", "ideal_camera", "predicted_shadows", "projection_matrices"]
+__all__ = ["ShadowFrame", "ShadowObjective", "ideal_camera", "observed_arrays", "predicted_shadows", "projection_matrices",
+           "shadow_distances"]
 
 
 @dataclass(frozen=True, eq=False)
@@ -119,28 +120,49 @@ def _pack_lights(hypotheses) -> np.ndarray | None:
     return out
 
 
-@dataclass(frozen=True, eq=False)
-class _Packed:
-    """One frame's arrays in :func:`studio.light._kernels.shadow_chamfer`'s layout."""
+def observed_arrays(target: SilhouetteTarget) -> tuple[np.ndarray, tuple]:
+    """``target``'s distance maps (C, H, W) and observed pixels ``(obs_y, obs_x, obs_start)`` in
+    :func:`studio.light._kernels.shadow_chamfer`'s layout."""
+    pixels = [np.nonzero(m) for m in target.masks]
+    start = np.cumsum([0] + [len(y) for y, _ in pixels]).astype(np.int64)
+    obs_y = np.concatenate([y for y, _ in pixels]).astype(np.int64)
+    obs_x = np.concatenate([x for _, x in pixels]).astype(np.int64)
+    return np.stack(target.distance_maps), (obs_y, obs_x, start)
 
-    mesh: tuple
-    occ: np.ndarray
-    dmaps: np.ndarray
-    obs: tuple
 
-    @classmethod
-    def of(cls, frame: ShadowFrame) -> _Packed | None:
-        topo = frame.topology
-        if topo is None:
-            return None
-        t = frame.target
-        pixels = [np.nonzero(m) for m in t.masks]
-        start = np.cumsum([0] + [len(y) for y, _ in pixels]).astype(np.int64)
-        obs_y = np.concatenate([y for y, _ in pixels]).astype(np.int64)
-        obs_x = np.concatenate([x for _, x in pixels]).astype(np.int64)
-        n, na, sign = frame.normals
-        mesh = (frame.vertices, n, na, float(sign), topo.u, topo.v, topo.f_uv, topo.f_vu)
-        return cls(mesh, np.stack(frame.occluders), np.stack(t.distance_maps), (obs_y, obs_x, start))
+def shadow_distances(vertices: np.ndarray, faces: np.ndarray, normals: tuple, topology, hypotheses, plane: np.ndarray,
+                     ground, cameras: Sequence, matrices: np.ndarray, occluders: np.ndarray, target: SilhouetteTarget,
+                     observed: tuple) -> np.ndarray:
+    """(N, K) ``D(S^e_k, S^o_k)`` (eq. 4.5, full-resolution units) of one body under each of
+    ``hypotheses`` (lists of lights; their union casts the shadow) in the ideal level ``cameras``
+    (``matrices`` their :func:`projection_matrices`), the body's own silhouettes ``occluders``
+    (K, H, W) taken out (§5.6), against ``target`` (``observed``: its :func:`observed_arrays`).
+
+    Scored by the compiled :func:`studio.light._kernels.shadow_chamfer` (the same numbers as
+    :func:`predicted_shadows` then :func:`studio.cost.silhouette_cost`); what it cannot score (an
+    open mesh, a light below a contour vertex) is rendered exactly
+    (:func:`studio.render.shadow_silhouettes`)."""
+    from studio.cost.silhouette import _score_view
+    from studio.light._kernels import shadow_chamfer
+
+    hypotheses = [list(h) for h in hypotheses]
+    lights = _pack_lights(hypotheses) if hypotheses else None
+    n_views = len(target)
+    if topology is not None and lights is not None:
+        n, na, sign = normals
+        raw, ok = shadow_chamfer(vertices, n, na, float(sign), topology.u, topology.v, topology.f_uv, topology.f_vu,
+                                 lights, plane, matrices, occluders, observed[0], *observed[1], target.tau_level)
+    else:
+        raw, ok = np.zeros((len(hypotheses), n_views, 3)), np.zeros((len(hypotheses), n_views), bool)
+    for i, k in zip(*np.nonzero(~ok), strict=True):  # the renderer's exact path
+        mask = shadow_silhouettes([cameras[k]], vertices, faces, hypotheses[i], ground, normals=normals,
+                                  topology=topology, occluders=[occluders[k]])[0]
+        raw[i, k] = _score_view(target, k, mask)
+    xi, counts = target.xi, np.asarray(target.counts, float)
+    with np.errstate(divide="ignore", invalid="ignore"):  # eq. 4.4's normalisation, 0 for an empty side
+        fwd = np.where(raw[..., 2] > 0, raw[..., 0] / raw[..., 2] ** xi, 0.0)
+        bwd = np.where(counts > 0, raw[..., 1] / counts ** xi, 0.0)
+    return (fwd + bwd) * target.unit_factor
 
 
 class ShadowObjective:
@@ -165,7 +187,8 @@ class ShadowObjective:
         self.ground = ground
         normal, offset = _plane(ground)
         self._plane = np.append(normal, offset)
-        self._packed = [_Packed.of(f) for f in self.frames]
+        self._observed = [observed_arrays(f.target) for f in self.frames]
+        self._occluders = [np.stack(f.occluders) for f in self.frames]
         self.n_evaluations = 0
 
     @property
@@ -176,32 +199,16 @@ class ShadowObjective:
     def terms(self, hypotheses, ground=None) -> np.ndarray:
         """(N, T, K) ``D(S^e_{k,t}, S^o_{k,t})`` of each hypothesis (a list of lights), frame and
         view; the shadows cast on ``ground`` (default: the objective's)."""
-        from studio.cost.silhouette import _score_view
-        from studio.light._kernels import shadow_chamfer
         from studio.render.shadow import _plane
 
         ground = self.ground if ground is None else ground
         plane = self._plane if ground is self.ground else np.append(*_plane(ground))
         hypotheses = [list(h) for h in hypotheses]
         self.n_evaluations += len(hypotheses)
-        lights = _pack_lights(hypotheses) if hypotheses else None
-        n_views = len(self.frames[0].target)
-        out = np.empty((len(hypotheses), len(self.frames), n_views))
-        for t, (f, pk) in enumerate(zip(self.frames, self._packed, strict=True)):
-            if pk is not None and lights is not None:
-                raw, ok = shadow_chamfer(*pk.mesh, lights, plane, self.matrices, pk.occ, pk.dmaps, *pk.obs,
-                                         f.target.tau_level)
-            else:
-                raw, ok = np.zeros((len(hypotheses), n_views, 3)), np.zeros((len(hypotheses), n_views), bool)
-            for i, k in zip(*np.nonzero(~ok), strict=True):  # the renderer's exact path
-                mask = shadow_silhouettes([self.cameras[k]], f.vertices, f.faces, hypotheses[i], ground,
-                                          normals=f.normals, topology=f.topology, occluders=[f.occluders[k]])[0]
-                raw[i, k] = _score_view(f.target, k, mask)
-            xi, counts = f.target.xi, np.asarray(f.target.counts, float)
-            with np.errstate(divide="ignore", invalid="ignore"):  # eq. 4.4's normalisation, 0 for an empty side
-                fwd = np.where(raw[..., 2] > 0, raw[..., 0] / raw[..., 2] ** xi, 0.0)
-                bwd = np.where(counts > 0, raw[..., 1] / counts ** xi, 0.0)
-            out[:, t] = (fwd + bwd) * f.target.unit_factor
+        out = np.empty((len(hypotheses), len(self.frames), len(self.frames[0].target)))
+        for t, f in enumerate(self.frames):
+            out[:, t] = shadow_distances(f.vertices, f.faces, f.normals, f.topology, hypotheses, plane, ground,
+                                         self.cameras, self.matrices, self._occluders[t], f.target, self._observed[t])
         return out
 
     def per_view(self, lights) -> np.ndarray:

@@ -13,6 +13,7 @@ from studio.segment.metrics import binary_scores, tune_thresholds
 from studio.segment.morphology import Morphology, clean_labels, fill_holes, remove_small_components
 from studio.segment.session import SegmentOptions, SegmentationSummary, segment_session
 from studio.segment.skin import SkinClassifier, ycrcb_skin
+from studio.segment.static import StaticDetector, StaticSettings, ignore_masks
 from studio.segment.voting import FloorVotes, ShadowVoter, VotingResult, encode_ratio, floor_vote_image, vote_shadows
 
 __all__ = [
@@ -28,6 +29,8 @@ __all__ = [
     "SegmentationSummary",
     "ShadowVoter",
     "SkinClassifier",
+    "StaticDetector",
+    "StaticSettings",
     "Thresholds",
     "VotingResult",
     "binary_scores",
@@ -39,6 +42,7 @@ __all__ = [
     "fill_holes",
     "floor_vote_image",
     "hue_distance",
+    "ignore_masks",
     "learn_tint",
     "remove_small_components",
     "rgb_to_hsv",

@@ -6,7 +6,8 @@ Output, inside the session folder::
       segmentation.json             settings (with each camera's registration shift), per-camera
                                     statistics and mask quality (person fraction, components,
                                     clutter = share of person pixels outside the largest
-                                    component; per frame under ``frame_quality``), timings
+                                    component, static / ignored pixels relabelled background;
+                                    per frame under ``frame_quality``), timings
       background/<cam>/             background model (mean.exr, std.exr, model.json) — fitted
                                     once from background/<cam>/ and reused
       skin_models/<cam>.npz         per-camera skin model (self-trained unless given)
@@ -44,6 +45,7 @@ from studio.segment.classify import PERSON, SHADOW, Thresholds
 from studio.segment.errors import SegmentationError
 from studio.segment.morphology import Morphology, person_components
 from studio.segment.skin import SkinClassifier
+from studio.segment.static import StaticChanges, absolute_spec, ignore_masks
 from studio.segment.voting import FloorVotes, ShadowVoter
 
 __all__ = ["SegmentOptions", "SegmentationSummary", "segment_session"]
@@ -72,6 +74,8 @@ class SegmentOptions:
     register: bool = True  # move each background model onto the session's frames (a nudged camera)
     largest_component: bool = False  # keep only the largest person component per view
     hull: bool = False  # drop person components the visual hull of all views does not explain
+    static_frames: int = 0  # > 0: static changes (a box put down) after this many frames: background
+    ignore: tuple[str, ...] = ()  # user regions labelled background: "CAM=MASK.png" or a polygons JSON
 
 
 @dataclass(frozen=True)
@@ -104,6 +108,7 @@ def _setup_state(state: dict) -> None:
     calib = state.get("calibration")
     _STATE["voter"] = ShadowVoter(calib, state["cameras"]) if calib is not None and state.get("voting", True) else None
     _STATE["hull_cameras"] = {c: calib[c] for c in state["cameras"]} if calib is not None and state.get("hull") else None
+    _STATE["changes"] = StaticChanges(state.get("ignore") or {}, int(state.get("static_frames", 0)))
     grid = state.get("grid")
     _STATE["floor_votes"] = (
         FloorVotes(calib, grid, state["cameras"]) if grid is not None and state["overlay_every"] > 0 else None
@@ -126,7 +131,8 @@ def _load_state(spec: dict) -> dict:
     calib = ws.calibration if spec["voting"] or spec["hull"] else None
     _setup_state({"path": spec["path"], "out": spec["out"], "cameras": ws.camera_names, "models": models,
                   "largest_component": bool(options.largest_component), "voting": spec["voting"],
-                  "hull": spec["hull"],
+                  "hull": spec["hull"], "static_frames": int(options.static_frames),
+                  "ignore": ignore_masks(options.ignore, {c: models[c].shape for c in models}),
                   "calibration": calib, "overlay_every": int(options.overlay_every), "skin": skin,
                   "grid": _floor_grid(calib, options.floor_resolution) if calib is not None else None})
     _STATE["token"] = spec["token"]
@@ -158,6 +164,7 @@ def _segment_frame(index: int, state: dict) -> tuple[dict, dict, dict]:
     labels, ratios = {}, {}
     for cam in state["cameras"]:
         labels[cam], ratios[cam] = state["models"][cam].analyse(frame[cam], name=f"camera {cam!r} frame {index}")
+    changes = state["changes"](index, frame, labels)
     voter = state.get("voter")
     relabelled = {}
     if voter is not None:
@@ -173,6 +180,7 @@ def _segment_frame(index: int, state: dict) -> tuple[dict, dict, dict]:
         labels[cam], quality[cam] = person_components(labels[cam], state.get("largest_component", False))
         if state.get("hull_cameras"):
             quality[cam]["hull_dropped"] = dropped.get(cam, 0)
+        quality[cam].update(changes.get(cam, {}))
     state["last_quality"] = quality
     return frame, labels, relabelled
 
@@ -333,6 +341,8 @@ def _settings(models: dict, options: SegmentOptions, voting: bool, skin_cameras,
         "registration": registration,
         "largest_component": bool(options.largest_component),
         "hull": bool(options.hull),
+        "static_frames": int(options.static_frames),
+        "ignore": [str(v) for v in options.ignore],
     }
 
 
@@ -399,27 +409,21 @@ def segment_session(
             calib = ws.require_calibration("the visual-hull check of the masks (--hull)")
     except WorkspaceError as exc:
         raise SegmentationError(str(exc)) from None
-    state = {
-        "path": str(ws.path),
-        "out": str(ws.layout.root),
-        "cameras": cameras,
-        "models": models,
-        "calibration": calib,
-        "voting": voting,
-        "hull": hull,
-        "overlay_every": int(options.overlay_every),
-        "grid": _floor_grid(calib, options.floor_resolution) if calib is not None else None,
-        "skin": {},
-        "largest_component": bool(options.largest_component),
-    }
+    state = {"path": str(ws.path), "out": str(ws.layout.root), "cameras": cameras, "models": models,
+             "calibration": calib, "voting": voting, "hull": hull, "overlay_every": int(options.overlay_every),
+             "grid": _floor_grid(calib, options.floor_resolution) if calib is not None else None, "skin": {},
+             "largest_component": bool(options.largest_component), "static_frames": int(options.static_frames),
+             "ignore": ignore_masks(options.ignore, {c: m.shape for c, m in models.items()})}  # fmt: skip
     _setup_state(state)
     state["skin"] = _skin_models(ws, _STATE, frames, options)
     # workers elsewhere read a given skin model by its absolute path
     unit_options = options if options.skin_model is None else replace(options, skin_model=Path(options.skin_model).resolve())
+    unit_options = replace(unit_options, ignore=tuple(absolute_spec(v) for v in options.ignore))
     spec = {"token": uuid.uuid4().hex, "path": str(ws.path), "out": str(ws.layout.root), "options": unit_options,
             "voting": voting, "hull": hull, "skin_cameras": sorted(state["skin"]), "registration": registration}
     settings = _settings(models, options, voting, state["skin"], registration)
-    skipped = [] if force else _done_frames(ws, frames, settings)
+    # persistence needs every frame from the first: with static changes nothing is kept
+    skipped = [] if force or options.static_frames > 0 else _done_frames(ws, frames, settings)
     todo = [i for i in frames if i not in set(skipped)]
     summary = {
         "format": SUMMARY_FORMAT,
@@ -456,10 +460,12 @@ def segment_session(
         if progress:
             progress(len(results), total)
     try:
-        with open_runner(workers if len(todo) > 1 else 1, scheduler) as runner:
-            for (result,) in run_chains(runner, _segment_unit, [[i] for i in todo], spec=spec,
-                                        progress=progress, done=len(results), total=total):
-                results.append(result)
+        # static changes need the frames in order in one process: one chain
+        chains = [todo] if options.static_frames > 0 else [[i] for i in todo]
+        with open_runner(workers if len(chains) > 1 else 1, scheduler) as runner:
+            for chain in run_chains(runner, _segment_unit, chains, spec=spec, progress=progress,
+                                    done=len(results), total=total):
+                results.extend(chain)
     except ExecutionError as exc:
         raise SegmentationError(str(exc)) from None
     seconds = time.perf_counter() - t0
@@ -471,6 +477,11 @@ def segment_session(
     quality = {cam: {"person_fraction_mean": float(np.mean([r["quality"][cam]["person_fraction"] for r in results])),
                      "clutter_mean": float(np.mean([r["quality"][cam]["clutter"] for r in results])),
                      "clutter_max": float(np.max([r["quality"][cam]["clutter"] for r in results]))} for cam in cameras}
+    for cam in cameras:
+        for key in ("static", "ignored"):
+            values = [r["quality"][cam][key] for r in results if key in r["quality"][cam]]
+            if values:
+                quality[cam][f"{key}_mean"] = float(np.mean(values))
     summary.update(status="complete", skipped=skipped, mean_fractions=fractions, relabelled_by_voting=relabelled,
                    seconds=round(seconds, 3), quality=quality,
                    frame_quality={str(r["index"]): r["quality"] for r in sorted(results, key=lambda r: r["index"])})

@@ -5,8 +5,10 @@ view through the floor-induced homography; a torso or a background patch mislabe
 shadow does not. For every pair of views we precompute a pixel map (camera *k* pixel → the
 camera *j* pixel that sees the same floor point), computed through the ray / floor
 intersection with the full lens model (so no undistortion of the masks is needed; the
-distortion is handled exactly in the map, which is then applied with ``cv2.remap`` and
-nearest-neighbour lookup).
+distortion is handled exactly in the map, which is then applied with nearest-neighbour lookup:
+by ``cv2.remap`` over the shadow's bounding box in the reference path, ``vote(method="remap")``,
+or as flat pixel indices read at the shadow pixels only by the compiled kernels of
+:mod:`studio.segment.voting_kernel`, the default: the same labels, ~4× faster).
 
 Each iteration, for every view *k*:
 
@@ -45,6 +47,7 @@ import numpy as np
 
 from studio.segment.classify import BACKGROUND, PERSON, SHADOW
 from studio.segment.errors import SegmentationError
+from studio.segment.voting_kernel import consistent_shadow, touching_regions, unexplained_in_box
 
 __all__ = ["ShadowVoter", "VotingResult", "vote_shadows", "floor_vote_image", "FloorVotes", "encode_ratio"]
 
@@ -135,6 +138,23 @@ class ShadowVoter:
                 mx = uv[:, 0].reshape(h, w).astype(np.float32)
                 my = uv[:, 1].reshape(h, w).astype(np.float32)
                 self._maps[(k, j)] = cv2.convertMaps(mx, my, cv2.CV_16SC2, nninterpolation=True)[0]
+        self._ratio_tolerance8 = int(round(self.ratio_tolerance * RATIO_SCALE))
+        sizes = [int(np.prod(calibration[k].size)) for k in names]
+        self._offsets = np.concatenate([[0], np.cumsum(sizes)]).astype(np.int64)
+        self._indices = {}  # k → (H_k, W_k, J) int32: every other view's flat indices, interleaved per pixel
+        for k in names:
+            w, h = calibration[k].size
+            others = [self._flat_indices(k, j) for j in names if j != k]
+            self._indices[k] = np.stack(others, axis=-1) if others else np.empty((h, w, 0), np.int32)
+
+    def _flat_indices(self, k: str, j: str) -> np.ndarray:
+        """(H_k, W_k) int32: the map (k, j) as indices into the flat buffer of every view's
+        labels (-1 where ``cv2.remap`` would read outside view j, i.e. return ``NO_VIEW``)."""
+        xy = self._maps[(k, j)].astype(np.int64)
+        w, h = self.calibration[j].size
+        inside = (xy[..., 0] >= 0) & (xy[..., 0] < w) & (xy[..., 1] >= 0) & (xy[..., 1] < h)
+        flat = self._offsets[self.names.index(j)] + xy[..., 1] * w + xy[..., 0]
+        return np.where(inside, flat, -1).astype(np.int32)
 
     # ------------------------------------------------------------------ helpers
     def _check(self, labels_by_camera: Mapping[str, np.ndarray]) -> dict[str, np.ndarray]:
@@ -152,6 +172,20 @@ class ShadowVoter:
             out[name] = lab
         return out
 
+    def _check_ratios(self, labels_by_camera, ratios_by_camera) -> dict[str, np.ndarray] | None:
+        if ratios_by_camera is None:
+            return None
+        ratios = {}
+        for name in self.names:
+            r = np.asarray(ratios_by_camera[name]) if name in ratios_by_camera else None
+            if r is None or r.shape != np.shape(labels_by_camera[name]) or r.dtype != np.uint8:
+                raise SegmentationError(
+                    f"shadow voting: value ratios of camera {name!r} must be a "
+                    f"{np.shape(labels_by_camera[name])} uint8 image (see encode_ratio)"
+                )
+            ratios[name] = r
+        return ratios
+
     def warp(self, labels: np.ndarray, src: str, dst: str, box=None) -> np.ndarray:
         """Labels of view ``src`` seen from view ``dst`` through the floor (255: not seen).
 
@@ -165,26 +199,28 @@ class ShadowVoter:
             labels, m1, None, cv2.INTER_NEAREST, borderMode=cv2.BORDER_CONSTANT, borderValue=NO_VIEW
         )
 
-    def _evidence(self, labels, ratios, j: str, k: str, box):
-        """View j's (vote, refute, occlude) uint8 0/1 images over ``box`` of view k."""
+    def _evidence(self, state, j: str, k: str, box):
+        """View j's (vote, refute, occlude) uint8 0/1 images over ``box`` of view k (reference path)."""
         x, y, w, h = box
-        if ratios is not None:  # labels[j] is then (H, W, 2): labels and ratios, one remap
-            both = self.warp(labels[j], j, k, box)
-            warped, other = cv2.split(both)
+        ratios = state.ratios
+        if ratios is not None:  # packed labels and ratios, one remap
+            warped, other = cv2.split(self.warp(state.packed(j), j, k, box))
         else:
-            warped = self.warp(labels[j], j, k, box)
+            warped = self.warp(state.packed(j), j, k, box)
         shadow = (warped == SHADOW).view(np.uint8)
         refute = (warped == BACKGROUND).view(np.uint8)
         if ratios is not None:
             diff = cv2.absdiff(other, ratios[k][y : y + h, x : x + w])
-            consistent = (diff <= np.uint8(round(self.ratio_tolerance * RATIO_SCALE))).view(np.uint8)
+            consistent = (diff <= np.uint8(self._ratio_tolerance8)).view(np.uint8)
             refute = refute | (shadow & (1 - consistent))  # j sees the floor, darkened otherwise
             shadow = shadow & consistent
         if self.tolerance > 0:
             shadow = cv2.dilate(shadow, self._kernel)
         return shadow, refute, (warped == PERSON).view(np.uint8)
 
-    def _unexplained(self, labels: dict[str, np.ndarray], k: str, box, ratios=None, cache=None) -> np.ndarray:
+    def _unexplained_remap(self, state, k: str, box) -> np.ndarray:
+        """(h, w) uint8 unexplained shadow of k over ``box``: every other view warped over the
+        whole box with ``cv2.remap`` (the readable reference of the compiled path)."""
         x, y, w, h = box
         votes = np.zeros((h, w), np.uint8)
         refuters = np.zeros((h, w), np.uint8)
@@ -193,88 +229,133 @@ class ShadowVoter:
             if j == k:
                 continue
             key = (j, k, box)
-            evidence = None if cache is None else cache.get(key)
+            evidence = state.cache.get(key)
             if evidence is None:
-                evidence = self._evidence(labels, ratios, j, k, box)
-                if cache is not None:
-                    cache[key] = evidence
+                evidence = state.cache[key] = self._evidence(state, j, k, box)
             votes += evidence[0]
             refuters += evidence[1]
             occluders += evidence[2]
-        own_labels = labels[k] if labels[k].ndim == 2 else labels[k][..., 0]  # packed with ratios
-        own = own_labels[y : y + h, x : x + w] == SHADOW
+        own = state.labels[k][y : y + h, x : x + w] == SHADOW
         hidden = (occluders > 0) & (refuters == 0)  # only views blocked by the person see it
-        return own & (votes < self.min_votes) & ~hidden
+        return (own & (votes < self.min_votes) & ~hidden).view(np.uint8)
+
+    def _relabel_remap(self, state, k: str, box) -> np.ndarray | None:
+        """Reference: flat indices into k's labels of the unexplained shadow regions touching the
+        person (connected components of the whole box), or None."""
+        unexplained = self._unexplained_remap(state, k, box)
+        if not unexplained.any():
+            return None
+        lab = state.labels[k]
+        x, y, w, h = box
+        # person adjacency, looked up with a 1-pixel margin around the box
+        x0, y0 = max(x - 1, 0), max(y - 1, 0)
+        x1, y1 = min(x + w + 1, lab.shape[1]), min(y + h + 1, lab.shape[0])
+        person = cv2.dilate((lab[y0:y1, x0:x1] == PERSON).view(np.uint8), np.ones((3, 3), np.uint8))
+        person = person[y - y0 : y - y0 + h, x - x0 : x - x0 + w]
+        if not (person & unexplained).any():
+            return None
+        n, cc, stats, _ = cv2.connectedComponentsWithStats(unexplained, connectivity=8)
+        touching = np.zeros(n, bool)
+        touching[np.unique(cc[(person > 0) & (unexplained > 0)])] = True
+        touching[0] = False
+        touching &= stats[:, cv2.CC_STAT_AREA] >= self.min_region
+        if not touching.any():
+            return None
+        rows, cols = np.nonzero(touching[cc])
+        return (rows + y) * lab.shape[1] + cols + x
+
+    def _relabel_compiled(self, state, k: str, box) -> np.ndarray | None:
+        """The same pixels as :meth:`_relabel_remap`, evaluated near the shadow of k only."""
+        x, y, w, h = box
+        lab = state.labels[k]
+        use = state.ratios is not None
+        own_ratios = state.ratios[k] if use else lab
+        near = (lab[y : y + h, x : x + w] == SHADOW).view(np.uint8)
+        if self.tolerance > 0:
+            near = cv2.dilate(near, self._kernel)  # the pixels whose votes reach a shadow pixel
+        votes = consistent_shadow(self._indices[k], state.flat, state.flat_ratios, own_ratios, near, box, use,
+                                  self._ratio_tolerance8)  # fmt: skip
+        if self.tolerance > 0 and votes.shape[2]:
+            votes = cv2.dilate(votes, self._kernel)  # (h, w, J): every view's channel at once
+            votes = votes.reshape(h, w, -1)  # (OpenCV drops a single view's channel axis)
+        unexplained, positions = unexplained_in_box(self._indices[k], state.flat, state.flat_ratios, lab, own_ratios,
+                                                    box, votes, self.min_votes, use, self._ratio_tolerance8)  # fmt: skip
+        flip = touching_regions(unexplained, positions, lab, box, self.min_region) if len(positions) else positions
+        return flip if len(flip) else None
 
     # ------------------------------------------------------------------ voting
     def vote(
         self,
         labels_by_camera: Mapping[str, np.ndarray],
         ratios_by_camera: Mapping[str, np.ndarray] | None = None,
+        *,
+        method: str = "compiled",
     ) -> VotingResult:
         """Run the iterative relabelling; returns new label images (inputs are not changed).
 
         ``ratios_by_camera``: optional ``{camera: (H, W) uint8}`` value ratios ``I^V / μ^V``
         encoded by :func:`encode_ratio` (as :meth:`BackgroundModel.analyse` returns them);
         when given, votes must be photometrically consistent.
+
+        ``method``: ``"compiled"`` (default) evaluates the rule on the shadow pixels only
+        (:mod:`studio.segment.voting_kernel`); ``"remap"`` warps whole bounding boxes with
+        ``cv2.remap`` — the reference, same labels bit for bit, ~4× slower.
         """
-        labels = {k: v.copy() for k, v in self._check(labels_by_camera).items()}
-        ratios = None
-        if ratios_by_camera is not None:
-            ratios = {}
-            for name in self.names:
-                r = np.asarray(ratios_by_camera.get(name)) if name in ratios_by_camera else None
-                if r is None or r.shape != labels[name].shape or r.dtype != np.uint8:
-                    raise SegmentationError(
-                        f"shadow voting: value ratios of camera {name!r} must be a "
-                        f"{labels[name].shape} uint8 image (see encode_ratio)"
-                    )
-                ratios[name] = r
+        if method not in ("compiled", "remap"):
+            raise SegmentationError(f"shadow voting: method must be 'compiled' or 'remap', got {method!r}")
+        state = _VoteState(self, self._check(labels_by_camera), self._check_ratios(labels_by_camera, ratios_by_camera))
+        relabel = self._relabel_compiled if method == "compiled" else self._relabel_remap
         relabelled = {k: 0 for k in self.names}
         iterations = 0
-        cache: dict = {}  # (j, k, box) → view j's evidence in k; dropped when j's labels change
-        packed = {
-            k: lab if ratios is None else cv2.merge([lab, ratios[k]]) for k, lab in labels.items()
-        }
-        near = np.ones((3, 3), np.uint8)
         for iterations in range(1, self.max_iterations + 1):
             changes = {}
             for k in self.names:
-                lab = labels[k]
-                shadow = (lab == SHADOW).astype(np.uint8)
+                shadow = (state.labels[k] == SHADOW).view(np.uint8)
                 if not shadow.any():
                     continue
-                box = cv2.boundingRect(shadow)
-                x, y, w, h = box
-                unexplained = self._unexplained(packed, k, box, ratios, cache).astype(np.uint8)
-                if not unexplained.any():
-                    continue
-                # person adjacency, looked up with a 1-pixel margin around the box
-                x0, y0 = max(x - 1, 0), max(y - 1, 0)
-                x1, y1 = min(x + w + 1, lab.shape[1]), min(y + h + 1, lab.shape[0])
-                person = cv2.dilate((lab[y0:y1, x0:x1] == PERSON).astype(np.uint8), near)
-                person = person[y - y0 : y - y0 + h, x - x0 : x - x0 + w]
-                if not (person & unexplained).any():
-                    continue
-                n, cc, stats, _ = cv2.connectedComponentsWithStats(unexplained, connectivity=8)
-                touching = np.zeros(n, bool)
-                touching[np.unique(cc[(person > 0) & (unexplained > 0)])] = True
-                touching[0] = False
-                touching &= stats[:, cv2.CC_STAT_AREA] >= self.min_region
-                if touching.any():
-                    changes[k] = (box, touching[cc])
+                flip = relabel(state, k, cv2.boundingRect(shadow))
+                if flip is not None:
+                    changes[k] = flip
             if not changes:
                 break
-            for k, (box, flip) in changes.items():
-                x, y, w, h = box
-                labels[k][y : y + h, x : x + w][flip] = PERSON
-                relabelled[k] += int(flip.sum())
-                cache = {key: v for key, v in cache.items() if key[0] != k}
-                packed[k] = labels[k] if ratios is None else cv2.merge([labels[k], ratios[k]])
+            for k, flip in changes.items():
+                state.labels[k].reshape(-1)[flip] = PERSON  # a view of the flat buffer
+                relabelled[k] += len(flip)
+                state.changed(k)
         else:
             log.warning("shadow voting did not converge in %d iterations", self.max_iterations)
         log.debug("shadow voting: %d iterations, relabelled %s", iterations, relabelled)
-        return VotingResult(labels=labels, iterations=iterations, relabelled=relabelled)
+        return VotingResult(labels=state.labels, iterations=iterations, relabelled=relabelled)
+
+
+class _VoteState:
+    """Labels being relabelled by one :meth:`ShadowVoter.vote`: every view's labels are views into
+    one flat buffer (``flat``, read by the compiled kernels through the voter's indices); the
+    reference path keeps its packed label+ratio images and its evidence cache."""
+
+    def __init__(self, voter: ShadowVoter, labels: dict, ratios: dict | None):
+        self.flat = np.empty(voter._offsets[-1], np.uint8)
+        self.flat_ratios = np.zeros(voter._offsets[-1] if ratios is not None else 1, np.uint8)
+        self.labels, self.ratios = {}, ratios
+        for i, k in enumerate(voter.names):
+            part = self.flat[voter._offsets[i] : voter._offsets[i + 1]].reshape(labels[k].shape)
+            part[...] = labels[k]
+            self.labels[k] = part
+            if ratios is not None:
+                self.flat_ratios[voter._offsets[i] : voter._offsets[i + 1]] = ratios[k].ravel()
+        self.cache: dict = {}  # reference path: (j, k, box) → view j's evidence in k
+        self._packed: dict = {}  # reference path: k → labels (with ratios: (H, W, 2) labels, ratios)
+
+    def packed(self, k: str) -> np.ndarray:
+        if k not in self._packed:
+            lab = self.labels[k]
+            self._packed[k] = lab if self.ratios is None else cv2.merge([lab, self.ratios[k]])
+        return self._packed[k]
+
+    def changed(self, k: str) -> None:
+        """View k was relabelled: drop what was derived from its labels."""
+        self.cache = {key: v for key, v in self.cache.items() if key[0] != k}
+        self._packed.pop(k, None)
 
 
 def vote_shadows(

@@ -112,3 +112,67 @@ def test_scores_equal_a_plain_reference(model):
     got = library_scores(pts, cams, masks, yaws, (0.05, -0.1), factor=8)
     np.testing.assert_allclose(got, _scores_reference(pts, cams, masks, yaws, (0.05, -0.1), 8), rtol=0, atol=1e-12)
     assert got[0, 0] < got[1, 0]  # the body itself matches better than a distorted copy
+
+
+def _shadow_scores_reference(points, cameras, masks, shadow_masks, lights, weight, yaws, xy, factor):
+    """The shadow camera's views of library_scores written plainly: every point's shadow by the
+    renderer's eq. 5.2 (studio.render.shadow.shadow_vertices), projected by K[R|t] into the
+    pooled masks; inside = shadow or person, reached = shadow cells; weight / cameras each."""
+    from studio.render.shadow import shadow_vertices
+
+    out = np.zeros((len(points), len(yaws)))
+    for cam, mask, smask in zip(cameras, masks, shadow_masks):
+        h, w = mask.shape
+        hc, wc = -(-h // factor), -(-w // factor)
+        pooled = {}
+        for key, m in (("in", mask | smask), ("want", smask)):
+            pooled[key] = np.zeros((hc, wc), bool)
+            ys, xs = np.nonzero(m)
+            pooled[key][ys // factor, xs // factor] = True
+        K = cam.K.copy()
+        K[:2] /= factor
+        for light in lights:
+            for p in range(len(points)):
+                for j, yaw in enumerate(yaws):
+                    c, s = np.cos(yaw), np.sin(yaw)
+                    P = points[p] @ np.array([[c, -s, 0], [s, c, 0], [0, 0, 1.0]]).T + [xy[0], xy[1], 0]
+                    S, valid = shadow_vertices(P, light)
+                    X = S @ cam.R.T + cam.t.ravel()
+                    u = np.floor((K[0, 0] * X[:, 0] + K[0, 1] * X[:, 1]) / X[:, 2] + K[0, 2]).astype(int)
+                    v = np.floor(K[1, 1] * X[:, 1] / X[:, 2] + K[1, 2]).astype(int)
+                    ok = valid & (X[:, 2] > 0) & (u >= 0) & (u < wc) & (v >= 0) & (v < hc)
+                    hit = [(a, b) for a, b, o in zip(v, u, ok) if o and pooled["in"][a, b]]
+                    reached = {(a, b) for a, b in hit if pooled["want"][a, b]}
+                    out[p, j] += weight / len(cameras) * (
+                        1 - len(hit) / len(X) + 1 - len(reached) / max(pooled["want"].sum(), 1))
+    return out
+
+
+def test_shadow_views_equal_a_plain_reference(model):
+    """With the shadow camera (§5.5), the descriptor adds one view per camera and light: the
+    compiled scores equal the plain camera views plus the plain shadow views, a point and a
+    directional light alike, points above the point light counting as outside."""
+    import lightkit
+    from studio.fit.library import library_scores
+    from studio.render import DirectionalLight, PointLight
+
+    rng = np.random.default_rng(5)
+    cams = ring_cameras()[:2]
+    V = model.vertices(model.mean_shape())
+    lights = [PointLight([1.2, -0.8, 2.2]), DirectionalLight([0.4, 0.3, -1.0])]
+    labels = [lightkit.labels([c], (V, model.faces), lights)[0] for c in cams]
+    masks, shadows = [lab == 1 for lab in labels], [lab == 2 for lab in labels]
+    pts = V[rng.choice(len(V), 60)][None] * [[[1.0, 1.0, 1.0]], [[1.2, 0.8, 1.1]]]
+    pts[1, :4, 2] += 3.0  # above the point light: no shadow
+    yaws, xy = np.array([0.0, 0.8, -2.0]), (0.05, -0.1)
+    got = library_scores(pts, cams, masks, yaws, xy, factor=8,
+                         shadows={"lights": lights, "masks": shadows, "weight": 0.7})
+    want = (_scores_reference(pts, cams, masks, yaws, xy, 8)
+            + _shadow_scores_reference(pts, cams, masks, shadows, lights, 0.7, yaws, xy, 8))
+    np.testing.assert_allclose(got, want, rtol=0, atol=1e-12)
+    plain = library_scores(pts, cams, masks, yaws, xy, factor=8)
+    assert np.all(got > plain)  # the shadow views add their own (non-zero) distances
+    assert got[0, 0] < got[1, 0]
+    with pytest.raises(ValueError, match="shining upwards"):
+        library_scores(pts, cams, masks, yaws, xy, shadows={"lights": [DirectionalLight([0, 0, 1.0])],
+                                                             "masks": shadows})

@@ -32,7 +32,7 @@ def scene():
     labels = lightkit.labels(cams, (V, model.faces), list(LIGHTS))
     names = [c.name for c in cams]
     targets = {LEVEL: SilhouetteTarget.build([lab == 1 for lab in labels], level=LEVEL, names=names)}
-    shadow = ShadowTerm.build(LIGHTS, [lab == 2 for lab in labels], names, [LEVEL], weight=WEIGHT)
+    shadow = ShadowTerm.build(LIGHTS, cams, [lab == 2 for lab in labels], [LEVEL], weight=WEIGHT)
     obj = FrameObjective(model, cams, targets, model.mean_shape(), 0, shadow=shadow)
     moved = pose.copy()
     moved[:3] += [0.12, -0.08, 0.0]  # off the truth: every term is well above zero
@@ -41,19 +41,24 @@ def scene():
 
 
 def _expected(model, cams, labels, pose):
-    """(silhouette, shadow per view) of ``pose`` computed without the objective."""
+    """(silhouette, shadow per view) of ``pose`` computed without the objective. The shadow
+    views are compared in each camera's ideal image (the cameras have lens distortion): the
+    observed shadows and the body's silhouette undistorted, the shadow rendered by the ideal
+    camera."""
     V = model.vertices(model.mean_shape(), pose)
     lcams = [level_camera(c, LEVEL) for c in cams]
     body = [silhouette(c, V, model.faces) for c in lcams]
     shadows = []
     for c, b in zip(lcams, body, strict=True):
+        ideal = c.replace(dist=np.zeros(5))
         s = np.zeros_like(b)
         for light in LIGHTS:
-            s |= shadow_mask(c, V, model.faces, light)
-        shadows.append(s & ~b)
+            s |= shadow_mask(ideal, V, model.faces, light)
+        shadows.append(s & ~c.undistort_image(b))
     names = [c.name for c in cams]
     sil = silhouette_cost(SilhouetteTarget.build([lab == 1 for lab in labels], level=LEVEL, names=names), body)
-    sha = silhouette_cost(SilhouetteTarget.build([lab == 2 for lab in labels], level=LEVEL, names=names), shadows)
+    observed = [c.undistort_image(lab == 2) for c, lab in zip(cams, labels, strict=True)]
+    sha = silhouette_cost(SilhouetteTarget.build(observed, level=LEVEL, names=names), shadows)
     return sil.total, sha.per_view
 
 

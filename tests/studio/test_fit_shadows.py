@@ -31,8 +31,7 @@ def _objective(model, cams, labels, weight, views=(0, 1)):
     cams = [cams[i] for i in views]
     labels = [labels[i] for i in views]
     targets = build_targets([lab == 1 for lab in labels], [c.name for c in cams], OPTIONS)
-    shadow = ShadowTerm.build([LIGHT], [lab == 2 for lab in labels], [c.name for c in cams], OPTIONS.levels,
-                              weight=weight)
+    shadow = ShadowTerm.build([LIGHT], cams, [lab == 2 for lab in labels], OPTIONS.levels, weight=weight)
     return FrameObjective(model, cams, targets, model.mean_shape(), 0, shadow=shadow)
 
 
@@ -75,9 +74,11 @@ def test_fit_frame_reports_shadow_term_and_checks_masks(scene):
     with pytest.raises(FitError, match=r"shadow_masks: one observed shadow mask per camera"):
         fit_frame(model, cams, [lab == 1 for lab in labels], options=tiny, lights=[LIGHT], shadow_masks=[])
     with pytest.raises(ValueError, match=r"shadow weight: expected >= 0"):
-        ShadowTerm.build([LIGHT], [labels[0] == 2], ["cam0"], (0,), weight=-1)
+        ShadowTerm.build([LIGHT], cams[:1], [labels[0] == 2], (0,), weight=-1)
     with pytest.raises(ValueError, match=r"the shadow term needs at least one light"):
-        ShadowTerm.build([], [labels[0] == 2], ["cam0"], (0,))
+        ShadowTerm.build([], cams[:1], [labels[0] == 2], (0,))
+    with pytest.raises(ValueError, match=r"shadow_masks: expected one per camera \(2\), got 1"):
+        ShadowTerm.build([LIGHT], cams[:2], [labels[0] == 2], (0,))
 
 
 def test_one_camera_is_fitted_with_a_light_and_flagged_without(scene):
@@ -122,3 +123,32 @@ def test_fit_session_with_shadows_needs_a_light(tmp_path):
     lightkit.make_session(tmp_path / "s", [LIGHT], n_frames=2)
     with pytest.raises(FitError, match=r"no light estimated — run `studio light` first"):
         fit_session(tmp_path / "s", gender="female", shadows=1.0)
+
+
+def test_one_view_library_finds_the_depth_from_the_shadow():
+    """One camera cannot tell a body's depth along its rays; the shadow camera can (§5.5). The
+    library searched over floor points along the line of sight, its shadow views on, puts a
+    walking body back within 6 cm of where it stands, started 20 cm off, facing its way."""
+    from calibration.rotation import rotvec_to_matrix
+    from studio.fit.library import family_pose, library_match, stand_on_floor
+
+    model = BodyModel.load("female")
+    cam = lightkit.cameras(size=(400, 300), focal=340.0, n=1)[0]
+    pose = family_pose(model, "walk")
+    pose[3:6] = [0.0, 0.0, 1.1]
+    pose = stand_on_floor(model, model.mean_shape(), pose[None])[0]
+    V = model.vertices(model.mean_shape(), pose)
+    lab = lightkit.labels([cam], (V, model.faces), [LIGHT])[0]
+    centroid = V[:, :2].mean(axis=0)  # the library stands a body's vertex centroid over the floor point
+    axis = centroid - cam.center[:2]
+    axis /= np.linalg.norm(axis)
+    floor = centroid + 0.2 * axis + np.outer(np.linspace(-0.4, 0.4, 9), axis)  # the truth at -0.2
+    views = {"lights": [LIGHT], "masks": [lab == 2]}
+    lit = library_match(model, [cam], [lab == 1], floor, shadows=views, shortlist=8)
+    assert np.linalg.norm(lit["xy"] - centroid) < 0.06 and lit["families"][0] in ("walk", "run")
+    assert lit["poses"].shape == (8, len(pose)) and len(lit["scores"]) == 8
+    heading = rotvec_to_matrix(lit["poses"][0][3:6]) @ [0.0, -1.0, 0.0]
+    assert heading @ (rotvec_to_matrix(pose[3:6]) @ [0.0, -1.0, 0.0]) > np.cos(np.radians(35))
+    dark = library_match(model, [cam], [lab == 1], floor, shortlist=8)
+    assert lit["scores"][0] > dark["scores"][0]  # the shadow views add their own distance
+

@@ -141,3 +141,68 @@ def test_floor_votes_reject_unknown_cameras(scene):
     assert votes({"cam0": truth["cam0"]}).max() == 1
     with pytest.raises(SegmentationError, match="floor votes: camera 'cam1' is not in the calibration"):
         votes({"cam1": truth["cam1"]})
+
+
+def _perturbed(labels: dict, seed: int) -> dict:
+    """Labels with every case of the rule present: random shadow blobs (some touching the person,
+    some not, some seen by no other view), person blobs blocking other views, background holes."""
+    rng = np.random.default_rng(seed)
+    out = {}
+    for c, lab in labels.items():
+        lab = lab.copy()
+        h, w = lab.shape
+        for value in (SHADOW, SHADOW, SHADOW, PERSON, 0):
+            for _ in range(6):
+                y, x = rng.integers(0, h - 8), rng.integers(0, w - 12)
+                lab[y : y + rng.integers(2, 8), x : x + rng.integers(2, 12)] = value
+        out[c] = lab
+    return out
+
+
+@pytest.mark.parametrize(
+    "options", [{}, {"tolerance": 0}, {"tolerance": 1, "min_votes": 2}, {"min_region": 1, "ratio_tolerance": 0.05}]
+)
+def test_compiled_voting_equals_the_remap_reference(scene, options):
+    """The compiled path (shadow pixels only) gives the reference's labels bit for bit, with and
+    without value ratios, on classified frames and on labels perturbed to hit every branch."""
+    from studio.segment.voting import encode_ratio
+
+    sc, frames, truth = scene
+    voter = ShadowVoter(sc.calibration, **options)
+    backgrounds = sc.backgrounds(4)
+    models = {c: BackgroundModel.fit(backgrounds[c]) for c in frames}
+    analysed = {c: models[c].analyse(frames[c]) for c in frames}
+    rng = np.random.default_rng(5)
+    noisy = {c: encode_ratio(np.where(t == SHADOW, 0.55, 1.0) + rng.normal(0, 0.06, t.shape)) for c, t in truth.items()}
+    cases = [({c: a[0] for c, a in analysed.items()}, {c: a[1] for c, a in analysed.items()}),
+             (_perturbed(truth, 1), noisy), (_perturbed({c: a[0] for c, a in analysed.items()}, 2), None)]  # fmt: skip
+    changed = 0
+    for labels, ratios in cases:
+        for r in (None, ratios):
+            fast = voter.vote(labels, r)
+            ref = voter.vote(labels, r, method="remap")
+            assert fast.iterations == ref.iterations and fast.relabelled == ref.relabelled
+            for c in labels:
+                np.testing.assert_array_equal(fast.labels[c], ref.labels[c])
+                assert not np.shares_memory(fast.labels[c], labels[c])  # inputs untouched
+            changed += sum(fast.relabelled.values())
+    assert changed > 500  # the cases do relabel: the equality is not between unchanged inputs
+
+
+@pytest.mark.parametrize("cameras", [["cam1"], ["cam0", "cam2"]])
+def test_compiled_voting_equals_the_reference_with_one_or_two_views(scene, cameras):
+    """One view: no floor point is explained, every shadow region touching the person becomes person."""
+    sc, _, truth = scene
+    voter = ShadowVoter(sc.calibration, cameras)
+    labels = {c: truth[c] for c in cameras}
+    fast, ref = voter.vote(labels), voter.vote(labels, method="remap")
+    assert fast.relabelled == ref.relabelled and sum(fast.relabelled.values()) > 0
+    for c in cameras:
+        np.testing.assert_array_equal(fast.labels[c], ref.labels[c])
+    if len(cameras) == 1:
+        assert (fast.labels["cam1"] == SHADOW).sum() < 0.1 * (truth["cam1"] == SHADOW).sum()
+
+
+def test_vote_rejects_an_unknown_method(scene, voter):
+    with pytest.raises(SegmentationError, match="method must be 'compiled' or 'remap', got 'fast'"):
+        voter.vote(scene[2], method="fast")

@@ -155,3 +155,28 @@ def test_import_and_segment_the_person(uu, calibrated, capsys):
     assert main(["report", str(session)]) == 1  # nothing to measure, and it says why, not "run fit first"
     err = capsys.readouterr().err
     assert "quality gates refused every frame" in err and "frame 1 failed: cam1: 2 disconnected blobs" in err, err
+
+
+def test_compiled_voting_equals_the_remap_reference_on_the_footage(uu, calibrated):
+    """Shadow voting (§5.5.2) through the calibrated floor on real frames: the compiled path (shadow
+    pixels only) and the reference (``cv2.remap`` over the shadow boxes) give the same labels."""
+    from calibration.sampling import iter_video_frames
+    from studio.segment import BackgroundModel, ShadowVoter
+
+    root, tmp, _ = uu
+    voter = ShadowVoter(RigCalibration.load(tmp / "floor.json"), list(CAMS))
+    models = {n: BackgroundModel.fit([f for _, f in itertools.islice(iter_video_frames(root / n / "background.avi"), 4)])
+              for n in CAMS}  # fmt: skip
+    frames = {n: [f for _, f in itertools.islice(iter_video_frames(root / n / "video.avi", step=50), 3, 5)]
+              for n in CAMS}  # frames 150 and 200  # fmt: skip
+    relabelled = 0
+    for i in range(2):
+        analysed = {n: models[n].analyse(frames[n][i]) for n in CAMS}
+        labels, ratios = {n: a[0] for n, a in analysed.items()}, {n: a[1] for n, a in analysed.items()}
+        for r in (None, ratios):
+            fast, ref = voter.vote(labels, r), voter.vote(labels, r, method="remap")
+            assert fast.relabelled == ref.relabelled and fast.iterations == ref.iterations
+            for n in CAMS:
+                np.testing.assert_array_equal(fast.labels[n], ref.labels[n])
+            relabelled += sum(fast.relabelled.values())
+    assert relabelled > 1000  # real floor shadows relabelled: the comparison is not between unchanged labels

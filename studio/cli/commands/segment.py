@@ -41,6 +41,12 @@ def register(subparsers) -> None:
                    help="keep only the largest person component per view (clutter is reported either way)")
     p.add_argument("--hull", action="store_true",
                    help="drop person components the visual hull of all views does not explain (needs the calibration)")
+    p.add_argument("--static", type=int, default=0, metavar="N",
+                   help="label background the static changes (a box put down) once unchanged for N frames while "
+                        "other foreground moved (a person who stops is kept); frames then run in order in one process")
+    p.add_argument("--ignore", action="append", default=[], metavar="CAM=MASK.png|POLYGONS.json",
+                   help="user region labelled background: a camera's mask image (non-zero = ignore) or a JSON of "
+                        "polygons per camera ({\"cameras\": {cam: [[[x, y], ...]]}}); repeatable")
     p.add_argument("--t-hsv", type=float, default=None, help="eq. 5.5 background threshold t^HSV")
     p.add_argument("--t-s", type=float, default=None, help="eq. 5.5 saturation threshold t^S")
     p.add_argument("--force", action="store_true",
@@ -81,6 +87,8 @@ def run(args) -> int:
         register=not args.no_register,
         largest_component=args.largest_component,
         hull=args.hull,
+        static_frames=max(0, args.static),
+        ignore=tuple(args.ignore),
     )
     total = len(frames) if frames is not None else len(ws.frame_indices)
     with Progress(

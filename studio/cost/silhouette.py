@@ -43,6 +43,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from .chamfer import _check_tau, _check_xi, _distance_to, _mask_flag, as_mask, normalise_chamfer
+from .view_terms import view_numerators
 
 __all__ = [
     "DEFAULT_TAU",
@@ -308,7 +309,17 @@ def _bbox(mask: np.ndarray) -> tuple[int, int, int, int] | None:
 
 
 def _score_view(target: SilhouetteTarget, k: int, model: np.ndarray) -> tuple[float, float, int]:
-    """Numerators of both directions and ``|F^e|`` for view ``k`` (level units)."""
+    """Numerators of both directions and ``|F^e|`` for view ``k`` (level units): the compiled
+    pass of :mod:`studio.cost.view_terms` for the exact distance (``mask_size="precise"``),
+    else :func:`_score_view_reference`."""
+    if target.mask_size != "precise":
+        return _score_view_reference(target, k, model)
+    return view_numerators(model, target.masks[k], target.distance_maps[k], target.tau_level, target.counts[k])
+
+
+def _score_view_reference(target: SilhouetteTarget, k: int, model: np.ndarray) -> tuple[float, float, int]:
+    """:func:`_score_view` in NumPy and OpenCV: masked sums over the model's box and the
+    distance transform of the model on the box grown by ``ceil(τ)``."""
     tau = target.tau_level
     n_obs = target.counts[k]
     box = _bbox(model)

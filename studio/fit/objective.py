@@ -13,7 +13,7 @@ import numpy as np
 
 from studio.body.skeleton import POSE_SIZE
 from studio.cost import SilhouetteTarget, pose_limit_penalty, shape_prior, silhouette_cost
-from studio.render.spans import silhouettes_contour
+from studio.render.spans import ContourRenderer
 from studio.render.pyramid import level_camera
 
 __all__ = ["CylinderObjective", "FrameObjective", "pose_bounds"]
@@ -61,6 +61,7 @@ class FrameObjective:
         self._level_cams = {lvl: [level_camera(c, lvl) for c in self.cameras] for lvl in self.targets}
         self._limits = self.model.pose_limits.astype(np.float64)
         self._limit_sigma = np.full(POSE_SIZE, 0.05)
+        self._renderers = {}
 
     @property
     def size(self) -> int:
@@ -82,13 +83,18 @@ class FrameObjective:
         poses = self.model.clip_pose(poses)
         out = np.empty((len(poses), self.model.n_vertices, 3))
         for i in range(0, len(poses), BATCH):
-            out[i : i + BATCH] = self.model.vertices_batch(shapes[i : i + BATCH], poses[i : i + BATCH])
+            out[i : i + BATCH] = self.model.vertices_batch(shapes[i : i + BATCH], poses[i : i + BATCH],
+                                                           free_shape=self.n_shape_free)
         return out
 
     def masks(self, vertices: np.ndarray, level: int) -> list[np.ndarray]:
         """Model silhouettes (H_l, W_l) bool of one mesh in every camera at ``level``
-        (the contour scanline renderer: same masks as :func:`studio.render.silhouette`)."""
-        return silhouettes_contour(self._level_cams[level], vertices, self.faces)
+        (the contour scanline renderer, prepared once per level: same masks as
+        :func:`studio.render.silhouette`)."""
+        r = self._renderers.get(level)
+        if r is None or r.n_vertices != len(vertices):
+            r = self._renderers[level] = ContourRenderer(self._level_cams[level], self.faces, len(vertices))
+        return r(vertices)
 
     @property
     def faces(self) -> np.ndarray:

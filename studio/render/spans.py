@@ -19,12 +19,14 @@ within round-off of an edge (see ``tests/studio/test_render_spans.py``).
 
 from __future__ import annotations
 
+import threading
+
 import numpy as np
 from numba import njit
 
 from .raster import _check_mesh
 
-__all__ = ["silhouettes_fast", "silhouettes_contour", "face_normals"]
+__all__ = ["ContourRenderer", "silhouettes_fast", "silhouettes_contour", "face_normals"]
 
 #: Tolerance of the edge test, in pixels² (as :mod:`studio.render.raster`).
 _EDGE_EPS = 1e-9
@@ -216,6 +218,70 @@ def _pinhole_lens(camera) -> tuple | None:
             np.asarray(camera.K, dtype=np.float64), d[:12].copy())
 
 
+class ContourRenderer:
+    """:func:`silhouettes_contour` for one set of ``cameras`` and ``faces``, with what does not
+    change between meshes prepared once: the mesh's edge–face topology (hashing the faces
+    cost 70 µs per call), each camera's centre and lens. ``renderer(vertices)`` returns the
+    same masks as ``silhouettes_contour(cameras, vertices, faces)``; each view is one
+    compiled call (:func:`studio.render.winding.contour_silhouette`) with a difference image
+    per view kept between calls (4 views of the walk body, CPU per mesh, same run: 1.07 → 0.49 ms
+    at full resolution, 0.76 → 0.38 ms at level 1; the same masks bit for bit)."""
+
+    def __init__(self, cameras, faces: np.ndarray, n_vertices: int):
+        self.cameras = list(cameras)
+        self.n_vertices = int(n_vertices)
+        _, F = _check_mesh(np.zeros((self.n_vertices, 3)), faces)
+        self.faces = np.ascontiguousarray(F, dtype=np.int64)
+        self.topology = _topology(self.faces, self.n_vertices)
+        self.centres = np.stack([np.asarray(c.center, dtype=np.float64) for c in self.cameras], axis=1)
+        self.lenses = [_pinhole_lens(c) for c in self.cameras]
+        # difference images of the scanline fill, kept all zeros between calls; a call made
+        # while another thread holds them uses fresh ones
+        self._diffs = [np.zeros((int(c.size[1]), int(c.size[0]) + 1), np.int32) for c in self.cameras]
+        self._lock = threading.Lock()
+
+    def __call__(self, vertices: np.ndarray, *, near: float = 1e-3) -> list[np.ndarray]:
+        """Silhouettes (H_k, W_k) bool of the mesh ``vertices`` (n_vertices, 3) in each camera."""
+        from .winding import front_faces
+
+        V = np.asarray(vertices, dtype=np.float64)
+        if V.shape != (self.n_vertices, 3):
+            raise ValueError(f"vertices: expected ({self.n_vertices}, 3), got {V.shape}")
+        topo = self.topology
+        if topo is None:
+            return silhouettes_fast(self.cameras, V, self.faces, near=near)
+        V = np.ascontiguousarray(V)
+        facing = front_faces(V, self.faces, self.centres)  # (F, C)
+        mine = self._lock.acquire(blocking=False)
+        try:
+            diffs = self._diffs if mine else [np.zeros_like(d) for d in self._diffs]
+            return self._views(V, facing, diffs, near)
+        finally:
+            if mine:
+                self._lock.release()
+
+    def _views(self, V, facing, diffs, near) -> list[np.ndarray]:
+        from .winding import contour_edges, contour_silhouette, winding_fill
+
+        topo = self.topology
+        out = []
+        for k, (cam, lens) in enumerate(zip(self.cameras, self.lenses, strict=True)):
+            if lens is not None:
+                mask, ok = contour_silhouette(facing[:, k], topo.u, topo.v, topo.f_uv, topo.f_vu, V, *lens,
+                                              int(cam.size[0]), int(cam.size[1]), float(near), diffs[k])
+                out.append(mask if ok else silhouettes_fast([cam], V, self.faces, near=near)[0])
+                continue
+            u, v, used = contour_edges(facing[:, k], topo.u, topo.v, topo.f_uv, topo.f_vu, len(V))
+            uv_used, depth, _ = cam.project_points(V[used])
+            if len(used) and depth.min() <= near:
+                out.append(silhouettes_fast([cam], V, self.faces, near=near)[0])
+                continue
+            uv = np.empty((len(V), 2))
+            uv[used] = uv_used
+            out.append(winding_fill(uv[u], uv[v], *cam.size))
+        return out
+
+
 def silhouettes_contour(cameras, vertices: np.ndarray, faces: np.ndarray, *,
                         near: float = 1e-3) -> list[np.ndarray]:
     """Silhouettes (H_k, W_k) bool of a CLOSED, consistently wound mesh in each camera.
@@ -228,28 +294,8 @@ def silhouettes_contour(cameras, vertices: np.ndarray, faces: np.ndarray, *,
     pixel centres lying exactly on the contour. Meshes that are not closed and consistently
     wound, and cameras with a vertex closer than ``near``, fall back to :func:`silhouettes_fast`.
     The per-view loops are compiled (:mod:`studio.render.winding`): 4 views of a 5,746-vertex
-    body at 328×246 take 2.3 ms instead of 4.1 ms with NumPy.
+    body at 328×246 take 2.3 ms instead of 4.1 ms with NumPy. Many meshes in the same cameras:
+    :class:`ContourRenderer`.
     """
-    from .winding import contour_edges, front_faces, project_pinhole, winding_fill  # numba: imported on first use
-
     V, F = _check_mesh(vertices, faces)
-    topo = _topology(F, len(V))
-    if topo is None:
-        return silhouettes_fast(cameras, V, F, near=near)
-    centres = np.stack([np.asarray(c.center, dtype=np.float64) for c in cameras], axis=1)
-    facing = front_faces(V, F, centres)  # (F, C)
-    out = []
-    for k, cam in enumerate(cameras):
-        u, v, used = contour_edges(facing[:, k], topo.u, topo.v, topo.f_uv, topo.f_vu, len(V))
-        lens = _pinhole_lens(cam)
-        if lens is None:
-            uv_used, depth, _ = cam.project_points(V[used])
-        else:
-            uv_used, depth = project_pinhole(V, used, *lens)
-        if len(used) and depth.min() <= near:
-            out.append(silhouettes_fast([cam], V, F, near=near)[0])
-            continue
-        uv = np.empty((len(V), 2))
-        uv[used] = uv_used
-        out.append(winding_fill(uv[u], uv[v], *cam.size))
-    return out
+    return ContourRenderer(cameras, F, len(V))(V, near=near)

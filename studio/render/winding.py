@@ -12,7 +12,7 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-__all__ = ["front_faces", "contour_edges", "project_pinhole", "scan_segment", "winding_fill"]
+__all__ = ["contour_edges", "contour_silhouette", "front_faces", "project_pinhole", "scan_segment", "winding_fill"]
 
 
 @njit(cache=True, nogil=True)
@@ -114,34 +114,71 @@ def winding_fill(p, q, w, h):  # pragma: no cover - compiled
 
 
 @njit(cache=True, nogil=True)
+def _pinhole_pixel(X0, X1, X2, R, t, K, d):  # pragma: no cover - compiled
+    """Pixel (u, v) and depth of one world point (see :func:`project_pinhole`); NaN pixel
+    behind the camera."""
+    k1, k2, p1, p2, k3, k4, k5, k6 = d[0], d[1], d[2], d[3], d[4], d[5], d[6], d[7]
+    s1, s2, s3, s4 = d[8], d[9], d[10], d[11]
+    xc = X0 * R[0, 0] + X1 * R[0, 1] + X2 * R[0, 2] + t[0]
+    yc = X0 * R[1, 0] + X1 * R[1, 1] + X2 * R[1, 2] + t[1]
+    z = X0 * R[2, 0] + X1 * R[2, 1] + X2 * R[2, 2] + t[2]
+    if z <= 0:
+        return np.nan, np.nan, z
+    x = xc / z
+    y = yc / z
+    r2 = x * x + y * y
+    radial = (1.0 + r2 * (k1 + r2 * (k2 + r2 * k3))) / (1.0 + r2 * (k4 + r2 * (k5 + r2 * k6)))
+    xy2 = 2.0 * x * y
+    xd = x * radial + p1 * xy2 + p2 * (r2 + 2.0 * x * x) + r2 * (s1 + s2 * r2)
+    yd = y * radial + p1 * (r2 + 2.0 * y * y) + p2 * xy2 + r2 * (s3 + s4 * r2)
+    return K[0, 0] * xd + K[0, 1] * yd + K[0, 2], K[1, 1] * yd + K[1, 2], z
+
+
+@njit(cache=True, nogil=True)
 def project_pinhole(V, idx, R, t, K, d):  # pragma: no cover - compiled
     """Pixels (n, 2) and depths (n,) of the vertices ``V[idx]`` in a pinhole camera (``R``,
     ``t``, ``K``) with OpenCV's radial / tangential / thin-prism distortion ``d`` = (k1, k2,
     p1, p2, k3, k4, k5, k6, s1, s2, s3, s4) (no sensor tilt): the arithmetic of
     :meth:`calibration.Camera.project_points` (:func:`calibration.distortion.distort_normalized`)
     for the few hundred contour vertices of a view, without its thirty array calls."""
-    k1, k2, p1, p2, k3, k4, k5, k6 = d[0], d[1], d[2], d[3], d[4], d[5], d[6], d[7]
-    s1, s2, s3, s4 = d[8], d[9], d[10], d[11]
     n = idx.shape[0]
     uv = np.empty((n, 2))
     depth = np.empty(n)
     for i in range(n):
-        X0, X1, X2 = V[idx[i], 0], V[idx[i], 1], V[idx[i], 2]
-        xc = X0 * R[0, 0] + X1 * R[0, 1] + X2 * R[0, 2] + t[0]
-        yc = X0 * R[1, 0] + X1 * R[1, 1] + X2 * R[1, 2] + t[1]
-        z = X0 * R[2, 0] + X1 * R[2, 1] + X2 * R[2, 2] + t[2]
-        depth[i] = z
-        if z <= 0:
-            uv[i, 0] = np.nan
-            uv[i, 1] = np.nan
-            continue
-        x = xc / z
-        y = yc / z
-        r2 = x * x + y * y
-        radial = (1.0 + r2 * (k1 + r2 * (k2 + r2 * k3))) / (1.0 + r2 * (k4 + r2 * (k5 + r2 * k6)))
-        xy2 = 2.0 * x * y
-        xd = x * radial + p1 * xy2 + p2 * (r2 + 2.0 * x * x) + r2 * (s1 + s2 * r2)
-        yd = y * radial + p1 * (r2 + 2.0 * y * y) + p2 * xy2 + r2 * (s3 + s4 * r2)
-        uv[i, 0] = K[0, 0] * xd + K[0, 1] * yd + K[0, 2]
-        uv[i, 1] = K[1, 1] * yd + K[1, 2]
+        uv[i, 0], uv[i, 1], depth[i] = _pinhole_pixel(V[idx[i], 0], V[idx[i], 1], V[idx[i], 2], R, t, K, d)
     return uv, depth
+
+
+@njit(cache=True, nogil=True)
+def contour_silhouette(facing, u, v, f_uv, f_vu, V, R, t, K, d, w, h, near, diff):  # pragma: no cover - compiled
+    """One view's silhouette in one pass: :func:`contour_edges` of the view's ``facing``
+    column, its vertices by :func:`project_pinhole`, then :func:`winding_fill` — the same
+    arithmetic, without the arrays passed between them. ``diff`` (h, w + 1) int32 is the
+    difference image, all zeros on entry and left so (only the cells written are cleared:
+    a fresh full-size one per view cost more than the fill). → ((h, w) bool, ok); ``ok``
+    False (an empty mask) when a contour vertex is within ``near`` of the camera plane (the
+    caller falls back)."""
+    start, end, used = contour_edges(facing, u, v, f_uv, f_vu, V.shape[0])
+    out = np.zeros((h, w), dtype=np.bool_)
+    uv = np.empty((V.shape[0], 2))
+    zmin = np.inf
+    for i in used:
+        px, py, z = _pinhole_pixel(V[i, 0], V[i, 1], V[i, 2], R, t, K, d)
+        uv[i, 0], uv[i, 1] = px, py
+        zmin = min(zmin, z)
+    if used.shape[0] and zmin <= near:
+        return out, False
+    box = np.array([h, -1, w, -1])
+    for e in range(start.shape[0]):
+        a, b = start[e], end[e]
+        scan_segment(uv[a, 0], uv[a, 1], uv[b, 0], uv[b, 1], diff, box)
+    ya, yb, xa, xb = box[0], box[1], box[2], box[3]
+    if yb < 0:
+        return out, True
+    for yi in range(ya, yb + 1):
+        acc = 0
+        for xi in range(xa, min(xb, w)):
+            acc += diff[yi, xi]
+            out[yi, xi] = acc != 0
+        diff[yi, xa:xb + 1] = 0
+    return out, True

@@ -264,3 +264,61 @@ def test_posed_edges_are_r_d_q_v_of_every_triangle(model):
     f = faces[5]
     want = G[0, model.face_parts[f]] @ (model.D_mean.astype(np.float64) + S[0] @ model.D_basis).reshape(F, 3, 3)[f] @ edges[f]
     assert np.abs(rigid[0, :, :, f] - want).max() < 2e-5
+
+
+def test_free_shape_hint_equals_the_full_shape_deformation():
+    """``free_shape``: the fixed coefficients folded into a cached base give the full
+    product's shape deformations and meshes to float32 rounding, for single bodies and
+    batches (equal and unequal fixed tails), and the hint is not needed for correctness."""
+    model = BodyModel.load("female")
+    rng = np.random.default_rng(11)
+    sig = np.sqrt(model.eigenvalues)
+    base = rng.normal(size=model.n_shape) * sig
+    poses = model.clip_pose(rng.normal(size=(4, POSE_SIZE)) * 0.3)
+    for free in (1, 6, 10):
+        shapes = np.repeat(base[None], 4, axis=0)
+        shapes[:, :free] += rng.normal(size=(4, free)) * sig[:free]
+        model._D_cache = None
+        full = np.array(model._shape_gradients(shapes))
+        model._D_cache = None
+        split = np.array(model._shape_gradients(shapes, free))
+        assert np.abs(full).max() > 0.5
+        np.testing.assert_allclose(split, full, rtol=0, atol=2e-6)
+        for b in range(4):  # one body at a time, as Nelder–Mead asks
+            got = model.vertices_batch(shapes[b:b + 1], poses[b:b + 1], free_shape=free)
+            want = model.vertices_batch(shapes[b:b + 1], poses[b:b + 1])
+            np.testing.assert_allclose(got, want, rtol=0, atol=2e-6)
+    # fixed tails that differ across the batch: the full product is used
+    shapes = rng.normal(size=(3, model.n_shape)) * sig
+    model._D_cache = None
+    mixed = np.array(model._shape_gradients(shapes, 5))
+    model._D_cache = None
+    np.testing.assert_array_equal(mixed, np.array(model._shape_gradients(shapes)))
+
+
+@pytest.mark.parametrize("n_bodies", [1, 16])
+def test_planar_posed_edges_equal_the_per_face_kernel_bit_for_bit(n_bodies):
+    """The model's kernel (maps faces last, part by part, blocks shared by the batch) gives
+    the per-face kernel's float32 edges exactly, with one shared or one D per body."""
+    from studio.body import posed
+    from studio.body.kinematics import chain_rotations
+
+    model = BodyModel.load("female")
+    rng = np.random.default_rng(n_bodies)
+    shapes = rng.normal(size=(n_bodies, model.n_shape)) * np.sqrt(model.eigenvalues)
+    poses = model.clip_pose(rng.normal(size=(n_bodies, POSE_SIZE)) * 0.5)
+    G, rv = chain_rotations(poses, model.hinge_axes)
+    rv, G = rv.astype(np.float32), G.astype(np.float32)
+    for D in (model._shape_gradients(shapes), model._shape_gradients(shapes[:1])):
+        want = posed.posed_edges(rv, model._Qc, model.joint_pairs, D, G, model.face_parts)
+        got = posed.posed_edges_planar(rv, posed.planar_q(model._Qc), model.joint_pairs, D, G, model._part_start)
+        assert np.abs(want).max() > 0.01
+        np.testing.assert_array_equal(got, want)
+
+
+def test_face_parts_out_of_range_are_rejected():
+    assert cube_model(face_parts=np.full(12, 14))._part_start[-2:].tolist() == [0, 12]
+    with pytest.raises(BodyModelError, match=r"face_parts must lie in 0\.\.14"):
+        cube_model(face_parts=np.full(12, 15))
+    with pytest.raises(BodyModelError, match=r"face_parts must lie in 0\.\.14"):
+        cube_model(face_parts=np.full(12, -1))

@@ -147,3 +147,42 @@ def test_compiled_projection_not_used_for_fisheye_or_tilt():
     fish = Camera(name="f", K=cam.K, dist=np.array([0.01, 0.0, 0.0, 0.0]), R=cam.R, t=cam.t, size=cam.size,
                   model="fisheye")
     assert _pinhole_lens(fish) is None
+
+
+def _composed(cameras, V, F):
+    """The contour path as separate kernels (contour edges → projection → winding fill)."""
+    from studio.render.spans import _pinhole_lens
+    from studio.render.winding import contour_edges, front_faces, project_pinhole, winding_fill
+
+    topo = _topology(F, len(V))
+    facing = front_faces(V, F, np.stack([c.center for c in cameras], axis=1))
+    out = []
+    for k, cam in enumerate(cameras):
+        u, v, used = contour_edges(facing[:, k], topo.u, topo.v, topo.f_uv, topo.f_vu, len(V))
+        uv_used, _ = project_pinhole(V, used, *_pinhole_lens(cam))
+        uv = np.empty((len(V), 2))
+        uv[used] = uv_used
+        out.append(winding_fill(uv[u], uv[v], *cam.size))
+    return out
+
+
+@pytest.mark.parametrize("level", [0, 1])
+def test_renderer_one_pass_per_view_equals_the_composed_kernels(body, level):
+    """ContourRenderer (one compiled call per view, the difference image cleared on the
+    contour's box only) gives the masks of the separate kernels bit for bit, body after body."""
+    from studio.render.spans import ContourRenderer
+
+    model, meshes = body
+    cams = [level_camera(c, level) for c in _rig()]
+    renderer = ContourRenderer(cams, model.faces, model.n_vertices)
+    for V in meshes + [m + [0.9, -0.4, 0.0] for m in meshes]:  # moved: one view cut by its border
+        got, want = renderer(V), _composed(cams, V, model.faces)
+        assert sum(int(w.sum()) for w in want) > 1000 >> (2 * level)
+        for g, w in zip(got, want, strict=True):
+            np.testing.assert_array_equal(g, w)
+        assert not any(d.any() for d in renderer._diffs)  # the difference images are left clean
+    with renderer._lock:  # another thread renders: this call uses fresh difference images
+        for g, w in zip(renderer(meshes[0]), _composed(cams, meshes[0], model.faces), strict=True):
+            np.testing.assert_array_equal(g, w)
+    with pytest.raises(ValueError, match="vertices"):
+        renderer(meshes[0][:-1])

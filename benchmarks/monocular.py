@@ -15,7 +15,8 @@ silhouettes, as variants:
   in order, each also started from the previous frame's answer (one more start, not tracking);
 - ``shadow_estimated`` (``--estimated``): plus the shadow term with the light estimated by
   :func:`studio.light.estimate_light` from the ``silhouette`` fits and the segmented shadows
-  (the thesis' procedure: fit without shadows, estimate the light, fit again).
+  (the thesis' procedure: fit without shadows, estimate the light, fit again); the estimate's
+  95 % intervals go to the quality gates (a light less certain than 3° / ±15 % flags the frames).
 
 Joint error: eq. 4.17, the mean over the 15 joints of our joint regressor applied to the fitted
 mesh and to the true body mapped into our topology (as ``benchmarks/fit_accuracy.py``). Each

@@ -77,6 +77,11 @@ MONOCULAR_SHORTLIST = 120
 #: ... and searches the floor point along the camera's line of sight by these offsets (m) from
 #: the point under the silhouette's feet (:func:`studio.fit.init.feet_on_floor`).
 MONOCULAR_DEPTHS = (-0.3, -0.2, -0.1, 0.0, 0.1, 0.2, 0.3)
+#: A frame fitted from one view whose body explains the silhouette poorly (the quality gates'
+#: agreement checks) is searched again this many times with other random draws; the lower total
+#: cost is kept. The search from one view is chaotic: a cost differing by one float ulp can turn
+#: a 40 mm fit into a 250 mm one, and the fit's own cost tells them apart.
+MONOCULAR_RETRIES = 1
 
 
 @dataclass(frozen=True, eq=False)
@@ -221,6 +226,7 @@ def fit_frame(
     shadow_weight: float = 1.0,
     ground=None,
     light_uncertainty: dict | None = None,
+    _attempt: int = 0,
 ) -> FrameFit:
     """Fit ``model`` to one frame's observed silhouettes.
 
@@ -246,6 +252,7 @@ def fit_frame(
     """
     cameras = list(cameras)
     masks = [np.asarray(m, dtype=bool) for m in masks]
+    given = (cameras, masks)
     if len(cameras) != len(masks) or not cameras:
         raise FitError(f"need one mask per camera: got {len(masks)} masks for {len(cameras)} cameras")
     for c, m in zip(cameras, masks, strict=True):
@@ -430,13 +437,32 @@ def fit_frame(
     timings["total"] = time.perf_counter() - t_start
     timings["cpu"] = time.process_time() - cpu_start  # this process's CPU time: comparable on a busy machine
     log.info("frame %d (%s): cost %.3f in %.1f s", frame, model.gender, costs["total"], timings["total"])
-    return FrameFit(
+    fit = FrameFit(
         frame=int(frame), gender=model.gender, shape=shape_out, pose=pose_out,
         joints=model.joints(shape_out, pose_out), costs=costs, timings={k: round(v, 4) for k, v in timings.items()},
         n_evaluations=int(pose_obj.n_evaluations + obj.n_evaluations
                           + (apf_obj.n_evaluations if apf_obj is not pose_obj else 0)), settings=options.to_dict(),
         quality=quality,
     )
+    if previous_pose is None and len(cameras) == 1 and _attempt < MONOCULAR_RETRIES and _explains_poorly(quality):
+        # one view's search is the least reliable: a body that explains its silhouette poorly is
+        # searched again with other random draws, and the lower total cost is kept
+        log.info("frame %d: the fitted body explains its view poorly: searching again", frame)
+        again = fit_frame(model, given[0], given[1], frame=frame, shape=shape, hint_pose=hint_pose, options=options,
+                          seed=np.random.default_rng(seed).integers(2**31), screen=screen, lights=lights,
+                          shadow_masks=shadow_masks, shadow_weight=shadow_weight, ground=ground,
+                          light_uncertainty=light_uncertainty, _attempt=_attempt + 1)
+        tries = [fit.costs["total"], again.costs["total"]]
+        spent = fit.timings["total"] + again.timings["total"]
+        fit = min((fit, again), key=lambda r: r.costs["total"])
+        fit.costs["attempt_costs"] = tries
+        fit.timings["all_attempts"] = round(spent, 4)
+    return fit
+
+
+def _explains_poorly(quality: dict) -> bool:
+    """The quality gates found the fitted body explaining the silhouettes poorly (pooled or in a view)."""
+    return any(r["check"] in ("agreement", "view_agreement") for r in quality.get("reasons", []))
 
 
 def fit_frame_gender(cameras, masks, gender: str = "auto", **kwargs) -> FrameFit:

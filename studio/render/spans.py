@@ -35,7 +35,7 @@ _EDGE_EPS = 1e-9
 def face_normals(vertices: np.ndarray, faces: np.ndarray) -> tuple[np.ndarray, np.ndarray, float]:
     """Unnormalised face normals (F, 3), ``n · a`` (F,) of each face's first vertex, and the
     sign (+1/−1) of the enclosed volume (the winding of a closed mesh). Compiled
-    (:func:`_face_normals`): one pass over the faces, ~5× NumPy's time for a body mesh."""
+    (:func:`_face_normals`): one pass over the faces, a quarter of NumPy's time for a body mesh."""
     n, na = _face_normals(np.ascontiguousarray(vertices, dtype=np.float64), np.ascontiguousarray(faces, dtype=np.int64))
     return n, na, (1.0 if float(na.sum()) >= 0 else -1.0)
 

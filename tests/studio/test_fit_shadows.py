@@ -182,3 +182,24 @@ def test_one_view_with_an_uncertain_light_is_suspect(scene):
                                         {"direction_ci_deg": 4.0, "distance_ci": [-9.0, 2.0]}]})
     assert two == {"direction_ci_deg": 4.0, "distance_ci": [-9.0, 20.0]}
     assert light_uncertainty({"lights": [{"direction_ci_deg": 0.5}]}) == {"direction_ci_deg": 0.5, "distance_ci": None}
+
+
+def test_one_view_fit_explaining_poorly_is_searched_again(scene):
+    """One view's search is the least reliable: when the fitted body explains its silhouette
+    poorly (the agreement gates), the frame is searched again with other draws and the lower
+    total cost kept, both attempts' costs recorded; several views are not searched again."""
+    from studio.fit.frame import _explains_poorly
+
+    model, cams, pose, labels = scene
+    tiny = FitOptions(levels=(2, 1, 1), n_particles=12, n_layers=2, nm_evaluations=6, final_evaluations=6,
+                      n_shape_free=0, partition_particles=0, partition_layers=0, limb_particles=0,
+                      rival_heading=False, find_support=False, start="stride")
+    args = {"shape": model.mean_shape(), "options": tiny, "lights": [LIGHT], "seed": 3}
+    once = fit_frame(model, cams[:1], [labels[0] == 1], shadow_masks=[labels[0] == 2], _attempt=1, **args)
+    assert _explains_poorly(once.quality)  # the tiny budget leaves the body off
+    fit = fit_frame(model, cams[:1], [labels[0] == 1], shadow_masks=[labels[0] == 2], **args)
+    first, second = fit.costs["attempt_costs"]
+    assert first == pytest.approx(once.costs["total"], rel=1e-12) and first != second
+    assert fit.costs["total"] == min(first, second) and fit.timings["all_attempts"] > fit.timings["total"]
+    both = fit_frame(model, cams, [lab == 1 for lab in labels], shadow_masks=[lab == 2 for lab in labels], **args)
+    assert "attempt_costs" not in both.costs

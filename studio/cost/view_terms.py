@@ -76,10 +76,18 @@ def _bbox(model, words):  # pragma: no cover - compiled
 def _numerators(model, words, observed, dist_obs, tau, m):  # pragma: no cover - compiled
     """(forward, backward, |F^e|, observed pixels in the window) of one view (``words``: see
     :func:`_bbox`); see :func:`view_numerators`. ``m = ceil(τ)``, ``tau`` in level pixels."""
-    h, w = model.shape
     r0, r1, c0, c1 = _bbox(model, words)
     if r1 == 0:
         return 0.0, 0.0, 0, 0
+    return numerators_in_box(model, observed, dist_obs, tau, m, r0, r1, c0, c1)
+
+
+@njit(cache=True, nogil=True)
+def numerators_in_box(model, observed, dist_obs, tau, m, r0, r1, c0, c1):  # pragma: no cover - compiled
+    """:func:`_numerators` with the model inside rows [r0, r1) and columns [c0, c1) given (a box
+    holding every model pixel; it need not be tight), for kernels that already know it (the
+    light's shadow kernel)."""
+    h, w = model.shape
     # d(F^e, F^o): C^τ(F^o) summed over the model's pixels
     forward = 0.0
     n_model = 0

@@ -16,6 +16,7 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
+from studio.cost.view_terms import numerators_in_box
 from studio.render.winding import scan_segment
 
 __all__ = ["shadow_chamfer"]
@@ -121,7 +122,7 @@ def _clip_and_project(seg, m, Mk, plane, uv):  # pragma: no cover - compiled
 
 
 @njit(cache=True, nogil=True)
-def shadow_chamfer(V, n, na, sign, eu, ev, f_uv, f_vu, lights, plane, M, occ, dmaps, obs_y, obs_x, obs_start,
+def shadow_chamfer(V, n, na, sign, eu, ev, f_uv, f_vu, lights, plane, M, occ, dmaps, observed, n_observed,
                    tau):  # pragma: no cover - compiled
     """Chamfer numerators of eq. 4.4 between the visible predicted shadow and the observed one.
 
@@ -130,8 +131,10 @@ def shadow_chamfer(V, n, na, sign, eu, ev, f_uv, f_vu, lights, plane, M, occ, dm
     ``[x, y, z, 1]`` (point, position) or ``[dx, dy, dz, 0]`` (directional, the direction it
     shines along); ``plane`` ``[nx, ny, nz, d]`` (n·X = d); ``M`` (C, 3, 4) the ideal level
     cameras ``K [R | t]``; ``occ`` (C, H, W) bool the body's silhouettes; ``dmaps`` (C, H, W)
-    the observed ``C^τ(S^o)``; the observed pixels of view k are ``(obs_y, obs_x)[obs_start[k]:
-    obs_start[k + 1]]``; ``tau`` in level pixels.
+    the observed ``C^τ(S^o)``, ``observed`` (C, H, W) bool the observed shadows and ``n_observed``
+    (C,) their pixel counts; ``tau`` in level pixels. The observed-to-predicted direction is
+    :func:`studio.cost.view_terms.numerators_in_box` on the filled box (the silhouette cost's own
+    exact distances).
 
     Returns (N, C, 3) ``[Σ_{S^e} C^τ(S^o), Σ_{S^o} C^τ(S^e), |S^e|]`` and (N, C) bool ``ok``
     (False: the outline fast path does not apply to the hypothesis — a light below a contour
@@ -176,25 +179,11 @@ def shadow_chamfer(V, n, na, sign, eu, ev, f_uv, f_vu, lights, plane, M, occ, dm
                             fwd += dmaps[k, yi, xi]
                             count += 1
             # observed → predicted: distance to the nearest predicted pixel, at most τ
-            bwd = 0.0
-            for p in range(obs_start[k], obs_start[k + 1]):
-                y0, x0 = obs_y[p], obs_x[p]
-                if count == 0 or y0 < ya - r or y0 > yb + r or x0 < xa - r or x0 > xb + r:
-                    bwd += tau
-                    continue
-                if model[y0, x0]:
-                    continue
-                best = tau * tau
-                for yy in range(max(y0 - r, ya), min(y0 + r, yb) + 1):
-                    dy2 = (yy - y0) * (yy - y0)
-                    if dy2 >= best:
-                        continue
-                    for xx in range(max(x0 - r, xa), min(x0 + r, xb - 1) + 1):
-                        if model[yy, xx]:
-                            d2 = dy2 + (xx - x0) * (xx - x0)
-                            if d2 < best:
-                                best = d2
-                bwd += min(np.sqrt(best), tau)
+            bwd = tau * n_observed[k]
+            if count > 0:
+                _, near, _, n_inside = numerators_in_box(model, observed[k], dmaps[k], tau, r, ya, yb + 1, xa,
+                                                         min(xb, w))
+                bwd = tau * (n_observed[k] - n_inside) + near
             out[i, k, 0], out[i, k, 1], out[i, k, 2] = fwd, bwd, count
             if yb >= 0:
                 for yi in range(ya, yb + 1):

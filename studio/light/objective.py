@@ -120,14 +120,11 @@ def _pack_lights(hypotheses) -> np.ndarray | None:
     return out
 
 
-def observed_arrays(target: SilhouetteTarget) -> tuple[np.ndarray, tuple]:
-    """``target``'s distance maps (C, H, W) and observed pixels ``(obs_y, obs_x, obs_start)`` in
-    :func:`studio.light._kernels.shadow_chamfer`'s layout."""
-    pixels = [np.nonzero(m) for m in target.masks]
-    start = np.cumsum([0] + [len(y) for y, _ in pixels]).astype(np.int64)
-    obs_y = np.concatenate([y for y, _ in pixels]).astype(np.int64)
-    obs_x = np.concatenate([x for _, x in pixels]).astype(np.int64)
-    return np.stack(target.distance_maps), (obs_y, obs_x, start)
+def observed_arrays(target: SilhouetteTarget) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """``target``'s distance maps (C, H, W), observed masks (C, H, W) bool and their pixel counts
+    (C,) in :func:`studio.light._kernels.shadow_chamfer`'s layout."""
+    return (np.stack(target.distance_maps), np.stack([np.ascontiguousarray(m, dtype=bool) for m in target.masks]),
+            np.asarray(target.counts, dtype=np.int64))
 
 
 def shadow_distances(vertices: np.ndarray, faces: np.ndarray, normals: tuple, topology, hypotheses, plane: np.ndarray,
@@ -151,7 +148,7 @@ def shadow_distances(vertices: np.ndarray, faces: np.ndarray, normals: tuple, to
     if topology is not None and lights is not None:
         n, na, sign = normals
         raw, ok = shadow_chamfer(vertices, n, na, float(sign), topology.u, topology.v, topology.f_uv, topology.f_vu,
-                                 lights, plane, matrices, occluders, observed[0], *observed[1], target.tau_level)
+                                 lights, plane, matrices, occluders, *observed, target.tau_level)
     else:
         raw, ok = np.zeros((len(hypotheses), n_views, 3)), np.zeros((len(hypotheses), n_views), bool)
     for i, k in zip(*np.nonzero(~ok), strict=True):  # the renderer's exact path

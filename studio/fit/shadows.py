@@ -10,8 +10,9 @@ camera" are averaged, not summed: they are not independent observations. ``w`` (
 
 As in the light's objective (:mod:`studio.light.objective`, eq. 5.9), the term is scored in each
 camera's *ideal* image (the lens distortion taken out: the observed shadows undistorted once, the
-body's silhouette per evaluation), where a floor outline reaches the image by one 3×4 projection:
-one call of the compiled :func:`studio.light._kernels.shadow_chamfer` per body hypothesis.
+body's silhouette looked up through the lens at the shadow's pixels only), where a floor outline
+reaches the image by one 3×4 projection: one call of the compiled
+:func:`studio.light._kernels.shadow_chamfer` per body hypothesis.
 """
 
 from __future__ import annotations
@@ -22,7 +23,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from studio.cost import SilhouetteTarget
-from studio.light.objective import ideal_camera, observed_arrays, projection_matrices, shadow_distances
+from studio.light.objective import ideal_camera, lens_index, observed_arrays, projection_matrices, shadow_distances
 from studio.render.pyramid import level_camera
 
 __all__ = ["ShadowTerm"]
@@ -65,6 +66,9 @@ class ShadowTerm:
         object.__setattr__(self, "_ideal", cams)
         object.__setattr__(self, "_matrices", {lvl: projection_matrices(c) for lvl, c in cams.items()})
         object.__setattr__(self, "_observed", {lvl: observed_arrays(t) for lvl, t in self.targets.items()})
+        # the body's silhouettes come through the lens: looked up at the ideal image's pixels
+        object.__setattr__(self, "_lens", {lvl: np.stack([lens_index(level_camera(c, lvl)) for c in self.cameras])
+                                           for lvl in self.targets})
         object.__setattr__(self, "_plane", np.append(*_plane(self.ground)))
         object.__setattr__(self, "_topologies", {})  # id(faces) → (faces, topology): hashing them costs 0.1 ms
 
@@ -79,10 +83,10 @@ class ShadowTerm:
             F = np.asarray(faces, dtype=np.int64)
             held = self._topologies[id(faces)] = (faces, F, _topology(F, len(V)))
         _, F, topology = held
-        occ = np.stack([c.undistort_image(np.asarray(m, bool)) for c, m in zip(cameras, body_masks, strict=True)])
+        occ = np.stack([np.asarray(m, bool).ravel() for m in body_masks])
         return shadow_distances(V, F, face_normals(V, F), topology, [self.lights], self._plane,
-                                self.ground, self._ideal[level], self._matrices[level], occ, self.targets[level],
-                                self._observed[level])[0]
+                                self.ground, self._ideal[level], self._matrices[level], (occ, self._lens[level]),
+                                self.targets[level], self._observed[level])[0]
 
     def cost(self, cameras, vertices, faces, body_masks, level: int) -> float:
         """``w · (1/K) Σ_k D(S^e_k, S^o_k)`` (eq. 5.7, second term)."""

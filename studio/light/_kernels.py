@@ -122,15 +122,19 @@ def _clip_and_project(seg, m, Mk, plane, uv):  # pragma: no cover - compiled
 
 
 @njit(cache=True, nogil=True)
-def shadow_chamfer(V, n, na, sign, eu, ev, f_uv, f_vu, lights, plane, M, occ, dmaps, observed, n_observed,
-                   tau):  # pragma: no cover - compiled
+def shadow_chamfer(V, n, na, sign, eu, ev, f_uv, f_vu, lights, plane, M, occ, occ_index, dmaps, observed,
+                   n_observed, tau):  # pragma: no cover - compiled
     """Chamfer numerators of eq. 4.4 between the visible predicted shadow and the observed one.
 
     ``V`` (V, 3) the body, ``n, na, sign`` its :func:`studio.render.spans.face_normals`,
     ``eu, ev, f_uv, f_vu`` its edge topology; ``lights`` (N, J, 4) per hypothesis J lights as
     ``[x, y, z, 1]`` (point, position) or ``[dx, dy, dz, 0]`` (directional, the direction it
     shines along); ``plane`` ``[nx, ny, nz, d]`` (n·X = d); ``M`` (C, 3, 4) the ideal level
-    cameras ``K [R | t]``; ``occ`` (C, H, W) bool the body's silhouettes; ``dmaps`` (C, H, W)
+    cameras ``K [R | t]``; ``occ`` (C, S) bool the body's silhouettes, flat, in images of S pixels
+    that ``occ_index`` (C, H, W) maps the level image's pixels to (flat index, −1: none; the
+    identity when the body was rendered in the ideal image, the nearest source pixel of the lens
+    when it was rendered through it — the body taken out at the shadow's pixels only);
+    ``dmaps`` (C, H, W)
     the observed ``C^τ(S^o)``, ``observed`` (C, H, W) bool the observed shadows and ``n_observed``
     (C,) their pixel counts; ``tau`` in level pixels. The observed-to-predicted direction is
     :func:`studio.cost.view_terms.numerators_in_box` on the filled box (the silhouette cost's own
@@ -142,7 +146,7 @@ def shadow_chamfer(V, n, na, sign, eu, ev, f_uv, f_vu, lights, plane, M, occ, dm
     points behind a camera are clipped (:func:`_clip_and_project`).
     """
     N, J = lights.shape[0], lights.shape[1]
-    C, h, w = occ.shape
+    C, h, w = occ_index.shape
     out = np.zeros((N, C, 3))
     ok = np.ones((N, C), dtype=np.bool_)
     facing = np.empty(n.shape[0], dtype=np.bool_)
@@ -174,7 +178,7 @@ def shadow_chamfer(V, n, na, sign, eu, ev, f_uv, f_vu, lights, plane, M, occ, dm
                     acc = 0
                     for xi in range(xa, min(xb, w)):
                         acc += diff[yi, xi]
-                        if acc != 0 and not occ[k, yi, xi]:
+                        if acc != 0 and not (occ_index[k, yi, xi] >= 0 and occ[k, occ_index[k, yi, xi]]):
                             model[yi, xi] = True
                             fwd += dmaps[k, yi, xi]
                             count += 1

@@ -127,13 +127,36 @@ def observed_arrays(target: SilhouetteTarget) -> tuple[np.ndarray, np.ndarray, n
             np.asarray(target.counts, dtype=np.int64))
 
 
+def identity_index(n_views: int, size: tuple[int, int]) -> np.ndarray:
+    """(C, H, W) flat pixel indices of (W, H) images: occluders rendered in the ideal image itself
+    (:func:`shadow_distances`)."""
+    w, h = size
+    return np.ascontiguousarray(np.broadcast_to(np.arange(h * w, dtype=np.int64).reshape(h, w), (n_views, h, w)))
+
+
+def lens_index(camera) -> np.ndarray:
+    """(H, W) flat index of the pixel of ``camera``'s image nearest each pixel of its ideal image
+    (−1: outside): ``camera.undistort_image`` of a mask, as a lookup (:func:`shadow_distances`)."""
+    import cv2
+
+    w, h = camera.size
+    if not camera.has_distortion:
+        return np.arange(h * w, dtype=np.int64).reshape(h, w)
+    mx, my = camera.undistort_maps()
+    flat = np.arange(h * w, dtype=np.float32).reshape(h, w)  # exact below 2^24 pixels
+    out = cv2.remap(flat, mx, my, cv2.INTER_NEAREST, borderMode=cv2.BORDER_CONSTANT, borderValue=-1.0)
+    return out.astype(np.int64)
+
+
 def shadow_distances(vertices: np.ndarray, faces: np.ndarray, normals: tuple, topology, hypotheses, plane: np.ndarray,
-                     ground, cameras: Sequence, matrices: np.ndarray, occluders: np.ndarray, target: SilhouetteTarget,
+                     ground, cameras: Sequence, matrices: np.ndarray, occluders: tuple, target: SilhouetteTarget,
                      observed: tuple) -> np.ndarray:
     """(N, K) ``D(S^e_k, S^o_k)`` (eq. 4.5, full-resolution units) of one body under each of
     ``hypotheses`` (lists of lights; their union casts the shadow) in the ideal level ``cameras``
-    (``matrices`` their :func:`projection_matrices`), the body's own silhouettes ``occluders``
-    (K, H, W) taken out (§5.6), against ``target`` (``observed``: its :func:`observed_arrays`).
+    (``matrices`` their :func:`projection_matrices`), the body's own silhouettes taken out (§5.6;
+    ``occluders``: ``(masks (K, S) flat, index (K, H, W))``, the ideal image's pixels looked up in
+    them, :func:`identity_index` or :func:`lens_index`), against ``target`` (``observed``: its
+    :func:`observed_arrays`).
 
     Scored by the compiled :func:`studio.light._kernels.shadow_chamfer` (the same numbers as
     :func:`predicted_shadows` then :func:`studio.cost.silhouette_cost`); what it cannot score (an
@@ -148,12 +171,14 @@ def shadow_distances(vertices: np.ndarray, faces: np.ndarray, normals: tuple, to
     if topology is not None and lights is not None:
         n, na, sign = normals
         raw, ok = shadow_chamfer(vertices, n, na, float(sign), topology.u, topology.v, topology.f_uv, topology.f_vu,
-                                 lights, plane, matrices, occluders, *observed, target.tau_level)
+                                 lights, plane, matrices, *occluders, *observed, target.tau_level)
     else:
         raw, ok = np.zeros((len(hypotheses), n_views, 3)), np.zeros((len(hypotheses), n_views), bool)
     for i, k in zip(*np.nonzero(~ok), strict=True):  # the renderer's exact path
+        flat, index = occluders
+        body = np.where(index[k] >= 0, flat[k][np.maximum(index[k], 0)], False)
         mask = shadow_silhouettes([cameras[k]], vertices, faces, hypotheses[i], ground, normals=normals,
-                                  topology=topology, occluders=[occluders[k]])[0]
+                                  topology=topology, occluders=[body])[0]
         raw[i, k] = _score_view(target, k, mask)
     xi, counts = target.xi, np.asarray(target.counts, float)
     with np.errstate(divide="ignore", invalid="ignore"):  # eq. 4.4's normalisation, 0 for an empty side
@@ -185,7 +210,8 @@ class ShadowObjective:
         normal, offset = _plane(ground)
         self._plane = np.append(normal, offset)
         self._observed = [observed_arrays(f.target) for f in self.frames]
-        self._occluders = [np.stack(f.occluders) for f in self.frames]
+        index = identity_index(len(self.cameras), self.cameras[0].size)
+        self._occluders = [(np.stack(f.occluders).reshape(len(self.cameras), -1), index) for f in self.frames]
         self.n_evaluations = 0
 
     @property

@@ -79,8 +79,8 @@ MONOCULAR_SHORTLIST = 120
 MONOCULAR_DEPTHS = (-0.3, -0.2, -0.1, 0.0, 0.1, 0.2, 0.3)
 #: A frame fitted from one view whose body explains the silhouette poorly (the quality gates'
 #: agreement checks) is searched again this many times with other random draws; the lower total
-#: cost is kept. The search from one view is chaotic: a cost differing by one float ulp can turn
-#: a 40 mm fit into a 250 mm one, and the fit's own cost tells them apart.
+#: cost is kept. The search from one view is chaotic: costs changed by 1e-9 (a faster cost, same
+#: arithmetic) turned a 43 mm fit into a 246 mm one, and the fit's own cost tells them apart.
 MONOCULAR_RETRIES = 1
 
 

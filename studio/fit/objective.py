@@ -118,7 +118,7 @@ class FrameObjective:
             masks = self.masks(v, level)
             out[i] = silhouette_cost(target, masks).total
             if self.shadow is not None:  # eq. 5.7
-                out[i] += self.shadow.cost(self._level_cams[level], v, self.faces, masks, level)
+                out[i] += self.shadow.cost(v, self.faces, masks, level)
         self.n_evaluations += len(X)
         return out + self.prior_weight * (sp + lp)
 
@@ -142,7 +142,7 @@ class FrameObjective:
             "level": int(level),
         }
         if self.shadow is not None:  # eq. 5.7: the shadow views averaged, with their own weight
-            per = self.shadow.per_view(self._level_cams[level], V, self.faces, masks, level)
+            per = self.shadow.per_view(V, self.faces, masks, level)
             out["shadow"] = float(self.shadow.weight * np.mean(per))
             out["shadow_per_view"] = {n: float(v) for n, v in zip(sc.names, per)}
             out["shadow_weight"] = self.shadow.weight

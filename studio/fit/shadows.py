@@ -70,24 +70,19 @@ class ShadowTerm:
         object.__setattr__(self, "_lens", {lvl: np.stack([lens_index(level_camera(c, lvl)) for c in self.cameras])
                                            for lvl in self.targets})
         object.__setattr__(self, "_plane", np.append(*_plane(self.ground)))
-        object.__setattr__(self, "_topologies", {})  # id(faces) → (faces, topology): hashing them costs 0.1 ms
 
-    def per_view(self, cameras, vertices, faces, body_masks, level: int) -> np.ndarray:
-        """(K,) ``D(S^e_k, S^o_k)`` (full-resolution units); ``cameras`` the fit's ``level``
-        cameras, ``body_masks`` the body's silhouettes in them."""
+    def per_view(self, vertices, faces, body_masks, level: int) -> np.ndarray:
+        """(K,) ``D(S^e_k, S^o_k)`` (full-resolution units); ``body_masks`` the body's silhouettes
+        in the fit's ``level`` cameras (through the lens)."""
         from studio.render.spans import _topology, face_normals
 
         V = np.asarray(vertices, dtype=np.float64)
-        held = self._topologies.get(id(faces))
-        if held is None or held[0] is not faces:
-            F = np.asarray(faces, dtype=np.int64)
-            held = self._topologies[id(faces)] = (faces, F, _topology(F, len(V)))
-        _, F, topology = held
+        F = np.asarray(faces, dtype=np.int64)
         occ = np.stack([np.asarray(m, bool).ravel() for m in body_masks])
-        return shadow_distances(V, F, face_normals(V, F), topology, [self.lights], self._plane,
+        return shadow_distances(V, F, face_normals(V, F), _topology(F, len(V)), [self.lights], self._plane,
                                 self.ground, self._ideal[level], self._matrices[level], (occ, self._lens[level]),
                                 self.targets[level], self._observed[level])[0]
 
-    def cost(self, cameras, vertices, faces, body_masks, level: int) -> float:
+    def cost(self, vertices, faces, body_masks, level: int) -> float:
         """``w · (1/K) Σ_k D(S^e_k, S^o_k)`` (eq. 5.7, second term)."""
-        return self.weight * float(np.mean(self.per_view(cameras, vertices, faces, body_masks, level)))
+        return self.weight * float(np.mean(self.per_view(vertices, faces, body_masks, level)))

@@ -186,3 +186,20 @@ def test_renderer_one_pass_per_view_equals_the_composed_kernels(body, level):
             np.testing.assert_array_equal(g, w)
     with pytest.raises(ValueError, match="vertices"):
         renderer(meshes[0][:-1])
+
+
+def test_topology_is_cached_by_the_faces_array_and_by_content():
+    """The fitter passes the same faces array every evaluation: its topology comes back without
+    hashing the faces again; an equal copy finds the same topology by content, another vertex
+    count does not share it."""
+    from studio.body import BodyModel
+    from studio.render.spans import _TOPOLOGY_BY_ARRAY, _topology
+
+    model = BodyModel.load("female")
+    F = np.asarray(model.faces, dtype=np.int64)
+    n = int(F.max()) + 1
+    topo = _topology(F, n)
+    assert topo is not None and _TOPOLOGY_BY_ARRAY[id(F)][0] is F
+    assert _topology(F, n) is topo and _topology(F.copy(), n) is topo
+    np.testing.assert_array_equal(_topology(F, n + 1).u, topo.u)
+    assert _topology(F, n + 1) is not topo

@@ -12,6 +12,7 @@ from studio.segment.hsv import circular_mean, circular_std, hue_distance, rgb_to
 from studio.segment.metrics import binary_scores, tune_thresholds
 from studio.segment.morphology import Morphology, clean_labels, fill_holes, remove_small_components
 from studio.segment.session import SegmentOptions, SegmentationSummary, segment_session
+from studio.segment.shadow_geometry import learn_shadow_direction, shadow_geometry
 from studio.segment.skin import SkinClassifier, ycrcb_skin
 from studio.segment.static import StaticDetector, StaticSettings, ignore_masks
 from studio.segment.voting import FloorVotes, ShadowVoter, VotingResult, encode_ratio, floor_vote_image, vote_shadows
@@ -43,10 +44,12 @@ __all__ = [
     "floor_vote_image",
     "hue_distance",
     "ignore_masks",
+    "learn_shadow_direction",
     "learn_tint",
     "remove_small_components",
     "rgb_to_hsv",
     "segment_session",
+    "shadow_geometry",
     "tune_thresholds",
     "vote_shadows",
     "ycrcb_skin",

@@ -55,6 +55,10 @@ class AdaptiveSettings:
     chroma: float = 0.08  # shadow: largest channel-ratio deviation from r · tint (relative)
     tint: tuple[float, float, float] = (1.0, 1.0, 1.0)  # per-channel ratio of the shadowing light (RGB)
     warmup: int = 30  # frames averaged with rate 1/n before the selective update takes over
+    # cast-shadow geometry (studio.segment.shadow_geometry): None = off; else the image direction
+    # from an object to its shadow, and the share of the chord a shadow pixel may have ahead of it
+    shadow_direction: tuple[float, float] | None = None
+    shadow_fraction: float = 0.2
 
     def __post_init__(self):
         for name in ("rate", "foreground_rate"):
@@ -70,19 +74,32 @@ class AdaptiveSettings:
             raise SegmentationError(f"AdaptiveSettings.value_ratio: expected 0 <= lower < upper, got {self.value_ratio!r}")
         if len(self.tint) != 3 or min(self.tint) <= 0:
             raise SegmentationError(f"AdaptiveSettings.tint: expected 3 positive ratios, got {self.tint!r}")
+        if self.shadow_direction is not None and (
+            len(self.shadow_direction) != 2 or not all(math.isfinite(v) for v in self.shadow_direction)
+            or not any(self.shadow_direction)
+        ):
+            raise SegmentationError(
+                f"AdaptiveSettings.shadow_direction: expected None or a non-zero (dx, dy), got {self.shadow_direction!r}"
+            )
+        if not (0.0 < self.shadow_fraction <= 1.0):
+            raise SegmentationError(f"AdaptiveSettings.shadow_fraction: expected (0, 1], got {self.shadow_fraction!r}")
         if self.warmup < 0:
             raise SegmentationError(f"AdaptiveSettings.warmup: expected >= 0, got {self.warmup!r}")
 
     def to_dict(self) -> dict:
         return {"rate": self.rate, "foreground_rate": self.foreground_rate, "noise_scale": self.noise_scale,
                 "noise_floor": self.noise_floor, "distance": self.distance, "value_ratio": list(self.value_ratio),
-                "chroma": self.chroma, "tint": list(self.tint), "warmup": self.warmup}  # fmt: skip
+                "chroma": self.chroma, "tint": list(self.tint), "warmup": self.warmup,
+                "shadow_direction": None if self.shadow_direction is None else list(self.shadow_direction),
+                "shadow_fraction": self.shadow_fraction}  # fmt: skip
 
     @classmethod
     def from_dict(cls, data: dict) -> "AdaptiveSettings":
         d = dict(data)
         d["value_ratio"] = tuple(float(v) for v in d["value_ratio"])
         d["tint"] = tuple(float(v) for v in d["tint"])
+        if d.get("shadow_direction") is not None:
+            d["shadow_direction"] = tuple(float(v) for v in d["shadow_direction"])
         return cls(**d)
 
 

@@ -29,6 +29,7 @@ from studio.segment.errors import SegmentationError
 from studio.segment.hsv import check_rgb, circular_mean, circular_std, rgb_to_hsv
 from studio.segment.morphology import Morphology, clean_labels
 from studio.segment.registration import estimate_shift, shift_hsv, shift_image
+from studio.segment.shadow_geometry import shadow_geometry
 
 __all__ = ["BackgroundModel", "MODEL_FORMAT", "MODEL_VERSION"]
 
@@ -188,7 +189,9 @@ class BackgroundModel:
         The running per-pixel RGB mean and deviation start from the fitted empty-scene mean (or
         from :meth:`start`'s first frame) and follow illumination drift; pixels labelled
         foreground adapt ``adaptive.foreground_rate`` times as fast, so an object left in the
-        scene becomes background after ~``1/foreground_rate`` frames. :meth:`classify` stays
+        scene becomes background after ~``1/foreground_rate`` frames. With
+        ``adaptive.shadow_direction`` set, shadow pixels not at the light-opposite end of their
+        region become person (:func:`studio.segment.shadow_geometry.shadow_geometry`). :meth:`classify` stays
         the fixed model of eq. 5.4–5.5. Returns (H, W) uint8 labels 0/1/2 (after morphology
         unless ``clean`` is False).
         """
@@ -202,7 +205,11 @@ class BackgroundModel:
         mean, dev, seen = self._running
         labels, ratio8 = adaptive_step(frame, mean, dev, self.adaptive, seen)
         self._running = (mean, dev, seen + 1)
-        return (clean_labels(labels, self.morphology) if clean else labels), ratio8
+        if clean:
+            labels = clean_labels(labels, self.morphology)
+        if self.adaptive.shadow_direction is not None:
+            labels = shadow_geometry(labels, self.adaptive.shadow_direction, self.adaptive.shadow_fraction)
+        return labels, ratio8
 
     @property
     def running_mean(self) -> np.ndarray | None:

@@ -8,8 +8,13 @@ are the tuning split, 700–1200 the evaluation split (every frame; ``--quick`` 
   run over every frame 1–1200 as the OpenCV subtractors are. Its detection settings
   (noise band, distance) are picked on the tuning split; the shadow gate likewise, with the
   shadow tint learned from the tuning split's shadow pixels (:func:`studio.segment.learn_tint`).
-  Two operating points are reported: best F on the tuning split, and best F among gates whose
-  tuning-split FPR-S is ≤ 0.30 (the issue's shadow target).
+  Four operating points are reported: best F on the tuning split (colour gate only), best F
+  among colour gates whose tuning-split FPR-S is ≤ 0.30 (the issue's shadow target), and best F
+  among colour gates with cast-shadow geometry (:func:`studio.segment.shadow_geometry`, the
+  object-to-shadow direction learned from the tuning split by
+  :func:`studio.segment.learn_shadow_direction`, chord fraction 0.15 / 0.2 / 0.25) whose
+  tuning-split FPR-S is ≤ 0.30, and the same with tuning-split FPR-S ≤ 0.15 (``GEOMETRY_MARGIN``)
+  — the point the target is checked at.
 * **toolkit, fixed** (:meth:`~studio.segment.BackgroundModel.classify`, eq. 5.4–5.5): background
   learned robustly from frames 1–469 (every 3rd), eq. 5.5 thresholds tuned on the tuning split.
 * **OpenCV MOG2, KNN** (shadow detection on), **CNT**, **GSOC** (opencv-contrib ``bgsegm``):
@@ -29,8 +34,16 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-from studio.segment import PERSON, SHADOW, AdaptiveSettings, BackgroundModel, learn_tint, tune_thresholds
+from studio.segment import (PERSON, SHADOW, AdaptiveSettings, BackgroundModel, learn_shadow_direction, learn_tint,
+                            tune_thresholds)  # fmt: skip
 from studio.segment.metrics import cdnet_scores
+
+
+# The target point's tuning-split FPR-S limit: half the target's 0.30, a margin for an estimate made
+# from 913 shadow pixels in 4 frames (470-699 every 10th; shadows only in 660-690). The plain
+# "FPR-S <= 0.30 on the tuning split" pick is reported too.
+GEOMETRY_MARGIN = 0.15
+TARGET_POINT = "toolkit adaptive + geometry (FPR-S≤0.15)"
 
 
 def _fmt(x) -> str:
@@ -70,8 +83,16 @@ def _run_opencv(frames, make, keep: set[int]):
     return out, last / (time.perf_counter() - t0)
 
 
+def _score_tuning(frames, truths, roi, tune, settings, rows):
+    out, _, _ = _run_adaptive(frames, settings, set(tune))
+    sc = cdnet_scores([out[i] for i in tune], [truths[i] for i in tune], roi)
+    rows.append((settings.to_dict(), sc["f_measure"], sc["fpr_shadow"]))
+    return sc["f_measure"], sc["fpr_shadow"]
+
+
 def tune_adaptive(frames, truths, roi, tune: list[int]) -> tuple[dict, list]:
-    """Detection grid, then shadow-gate grid (tint learned from the tuning GT), on the tuning split."""
+    """Detection grid, then shadow-gate grid (tint learned from the tuning GT), then the gates
+    with cast-shadow geometry (direction learned from the tuning GT), all on the tuning split."""
     keep = set(tune)
     rows = []
     best_det, best_f = None, -1.0
@@ -86,16 +107,22 @@ def tune_adaptive(frames, truths, roi, tune: list[int]) -> tuple[dict, list]:
             best_det, best_f = s, sc["f_measure"]
     tint = learn_tint([frames[i - 1] for i in tune], [tint_means[i] for i in tune],
                       [(truths[i] == 50) & roi for i in tune])  # fmt: skip
-    best = {"f": (best_det, best_f, 1.0), "shadow": None}
+    direction = learn_shadow_direction([truths[i] == 255 for i in tune], [(truths[i] == 50) & roi for i in tune])
+    best = {"f": (best_det, best_f, 1.0), "shadow": None, "geometry": None, "geometry_margin": None}
     for vr, chroma in itertools.product(((0.05, 0.2), (0.05, 0.3), (0.08, 0.4)), (0.05, 0.1, 0.2, 0.3)):
-        s = AdaptiveSettings(**{**best_det.to_dict(), "value_ratio": vr, "chroma": chroma, "tint": tint})
-        out, _, _ = _run_adaptive(frames, s, keep)
-        sc = cdnet_scores([out[i] for i in tune], [truths[i] for i in tune], roi)
-        rows.append((s.to_dict(), sc["f_measure"], sc["fpr_shadow"]))
-        if sc["f_measure"] > best["f"][1]:
-            best["f"] = (s, sc["f_measure"], sc["fpr_shadow"])
-        if sc["fpr_shadow"] <= 0.30 and (best["shadow"] is None or sc["f_measure"] > best["shadow"][1]):
-            best["shadow"] = (s, sc["f_measure"], sc["fpr_shadow"])
+        gate = {**best_det.to_dict(), "value_ratio": vr, "chroma": chroma, "tint": tint}
+        s = AdaptiveSettings.from_dict(gate)
+        f, fprs = _score_tuning(frames, truths, roi, tune, s, rows)
+        if f > best["f"][1]:
+            best["f"] = (s, f, fprs)
+        if fprs <= 0.30 and (best["shadow"] is None or f > best["shadow"][1]):
+            best["shadow"] = (s, f, fprs)
+        for fraction in (0.15, 0.2, 0.25):
+            s = AdaptiveSettings.from_dict({**gate, "shadow_direction": direction, "shadow_fraction": fraction})
+            f, fprs = _score_tuning(frames, truths, roi, tune, s, rows)
+            for key, limit in (("geometry", 0.30), ("geometry_margin", GEOMETRY_MARGIN)):
+                if fprs <= limit and (best[key] is None or f > best[key][1]):
+                    best[key] = (s, f, fprs)
     return best, rows
 
 
@@ -121,6 +148,10 @@ def bench_cdnet(data: Path, quick: bool) -> dict | None:
     picks = [("toolkit adaptive (best F)", best["f"])]
     if best["shadow"] is not None:
         picks.append(("toolkit adaptive (FPR-S≤0.3)", best["shadow"]))
+    if best["geometry"] is not None:
+        picks.append(("toolkit adaptive + geometry", best["geometry"]))
+    if best["geometry_margin"] is not None:
+        picks.append((TARGET_POINT, best["geometry_margin"]))
     for name, (settings, _, _) in picks:
         out, _, fps = _run_adaptive(frames, settings, keep)
         rows[name] = cdnet_scores([out[i] for i in evaluate], gts, roi)
@@ -158,21 +189,23 @@ def bench_cdnet(data: Path, quick: bool) -> dict | None:
     print(f"\n== 2. CDnet 2014 highway (real, single view 320×240): tuned on {len(tune)} GT frames "
           f"{tune[0]}–{tune[-1]} ({tune_s:.0f} s for the adaptive grid), evaluated on {len(evaluate)} "
           f"frames 700–1200; every method run over frames 1–{evaluate[-1]} in this run")  # fmt: skip
-    print(f"{'method':<30} {'recall':>7} {'precis.':>7} {'F':>7} {'FPR-S':>7} {'shadowP':>7} {'shadowR':>7} {'fps':>6}")
+    print(f"{'method':<40} {'recall':>7} {'precis.':>7} {'F':>7} {'FPR-S':>7} {'shadowP':>7} {'shadowR':>7} {'fps':>6}")
     for name, m in rows.items():
-        print(f"{name:<30} {_fmt(m['recall']):>7} {_fmt(m['precision']):>7} {_fmt(m['f_measure']):>7} "
+        print(f"{name:<40} {_fmt(m['recall']):>7} {_fmt(m['precision']):>7} {_fmt(m['f_measure']):>7} "
               f"{_fmt(m['fpr_shadow']):>7} {_fmt(m['shadow_precision']):>7} {_fmt(m['shadow_recall']):>7} "
               f"{speed[name]:6.0f}")  # fmt: skip
-    ours = rows["toolkit adaptive (best F)"]
-    gsoc = rows["OpenCV GSOC"]
+    # the issue's target: ONE operating point (chosen on the tuning split) with F above GSOC's
+    # and FPR-S <= 0.30 on the evaluation split
+    point = TARGET_POINT if TARGET_POINT in rows else "toolkit adaptive (best F)"
+    ours, gsoc = rows[point], rows["OpenCV GSOC"]
     f_met = ours["f_measure"] > gsoc["f_measure"]
-    shadow_best = min(rows[n]["fpr_shadow"] for n in rows if n.startswith("toolkit adaptive"))
-    print(f"   target F above GSOC: {ours['f_measure']:.3f} vs {gsoc['f_measure']:.3f} → {'MET' if f_met else 'MISSED'}")
-    print(f"   target shadow pixels labelled foreground ≤ 0.30 (at the best-F point): {ours['fpr_shadow']:.3f} → "
-          f"{'MET' if ours['fpr_shadow'] <= 0.30 else 'MISSED'}; lowest of the adaptive points {shadow_best:.3f}")  # fmt: skip
+    shadow_met = ours["fpr_shadow"] <= 0.30
+    print(f"   target, one point ({point}): F above GSOC {ours['f_measure']:.3f} vs {gsoc['f_measure']:.3f} → "
+          f"{'MET' if f_met else 'MISSED'}; FPR-S ≤ 0.30: {ours['fpr_shadow']:.3f} → {'MET' if shadow_met else 'MISSED'}")
     for name, (s, f, fprs) in picks:
         print(f"   {name}: {s.to_dict()} (tuning split F {f:.3f}, FPR-S {fprs:.3f})")
     return {"tuning_frames": tune, "eval_frames": [evaluate[0], evaluate[-1], len(evaluate)], "methods": rows,
             "frames_per_second": speed, "fixed_thresholds": fixed_best.to_dict(),
             "adaptive_settings": {name: s.to_dict() for name, (s, _, _) in picks},
-            "adaptive_tuning": table, "target_f_met": f_met, "target_shadow_met": ours["fpr_shadow"] <= 0.30}  # fmt: skip
+            "adaptive_tuning": table, "target_point": point, "target_f_met": f_met,
+            "target_shadow_met": shadow_met}  # fmt: skip

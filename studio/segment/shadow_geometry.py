@@ -49,6 +49,8 @@ def _walk(labels: np.ndarray, y: int, x: int, dx: float, dy: float, reach: int) 
 
 @njit(cache=True, nogil=True)
 def _relabel(labels: np.ndarray, out: np.ndarray, dx: float, dy: float, fraction: float, reach: int) -> int:
+    """Shadow stays shadow iff ``ahead <= fraction * (ahead + behind - 1)``, i.e.
+    ``behind >= need = ahead / fraction - ahead + 1``: the walk back stops after ``need`` steps."""
     h, w = labels.shape
     changed = 0
     for y in range(h):
@@ -56,7 +58,10 @@ def _relabel(labels: np.ndarray, out: np.ndarray, dx: float, dy: float, fraction
             if labels[y, x] != SHADOW:
                 continue
             ahead = _walk(labels, y, x, dx, dy, reach)
-            if ahead > fraction * (ahead + _walk(labels, y, x, -dx, -dy, reach) - 1):
+            need = ahead / fraction - ahead + 1.0
+            if need <= 1.0:
+                continue  # behind >= 1 always
+            if need > reach or _walk(labels, y, x, -dx, -dy, int(math.ceil(need))) < need:
                 out[y, x] = PERSON
                 changed += 1
     return changed

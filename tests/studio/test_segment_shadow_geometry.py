@@ -120,3 +120,35 @@ def test_cdnet_highway_tuning_frames_shadow_out_cars_kept(shared_data):
     assert shaped["fpr_shadow"] <= 0.3 and shaped["fpr_shadow"] == pytest.approx(plain["fpr_shadow"], abs=0.02)
     assert shaped["shadow_recall"] > 0.7 and shaped["shadow_precision"] > plain["shadow_precision"] + 0.3
     assert shaped["f_measure"] > 0.975
+
+
+def _reference(labels, direction, fraction, reach=96):
+    """The chord test pixel by pixel in plain Python (full walks both ways, no early stop)."""
+    dx, dy = np.asarray(direction, float) / np.hypot(*direction)
+    h, w = labels.shape
+
+    def walk(y, x, sx, sy):
+        for t in range(1, reach):
+            yy, xx = int(np.floor(y + t * sy + 0.5)), int(np.floor(x + t * sx + 0.5))
+            if not (0 <= yy < h and 0 <= xx < w) or labels[yy, xx] == 0:
+                return t
+        return reach
+
+    out = labels.copy()
+    for y, x in zip(*np.nonzero(labels == SHADOW)):
+        ahead = walk(y, x, dx, dy)
+        if ahead > fraction * (ahead + walk(y, x, -dx, -dy) - 1):
+            out[y, x] = PERSON
+    return out
+
+
+@pytest.mark.parametrize("direction, fraction", [((-0.51, 0.86), 0.15), ((1.0, 0.3), 0.2), ((0.0, -1.0), 0.5)])
+def test_compiled_walk_matches_the_plain_reference(direction, fraction):
+    rng = np.random.default_rng(7)
+    blobs = cv2.GaussianBlur(rng.uniform(0, 1, (70, 90)), (0, 0), 3)
+    labels = np.where(blobs > 0.5, np.where(rng.uniform(0, 1, blobs.shape) < 0.6, SHADOW, PERSON), 0).astype(np.uint8)
+    assert (labels == SHADOW).sum() > 500
+    got = shadow_geometry(labels, direction, fraction, reach=40)
+    ref = _reference(labels, direction, fraction, reach=40)
+    assert np.array_equal(got, ref)
+    assert 0 < (got != labels).sum() < (labels == SHADOW).sum()

@@ -49,7 +49,7 @@ import numpy as np
 
 from studio.blas import one_blas_thread
 from studio.body import BodyModel
-from studio.body.skeleton import JOINT_KIND, POSE_SIZE, pose_slices
+from studio.body.skeleton import POSE_SIZE
 from studio.cost import SilhouetteTarget
 from studio.fit.errors import FitError, UnusableFrame
 from studio.body.inverse import shape_from_measurements
@@ -59,6 +59,7 @@ from studio.fit.objective import CylinderObjective, FrameObjective, pose_bounds
 from studio.fit.options import FitOptions
 from studio.fit.props import find_support
 from studio.fit.quality import fit_quality, refused_quality, screen_masks
+from studio.fit.search import _heading, _part_groups, _partitioned_search, _partitions, _pose_sigma
 from studio.optimize import Stage, annealed_particle_filter, staged_nelder_mead, thesis_stages
 
 __all__ = ["FitOptions", "FrameFit", "fit_frame", "fit_frame_gender"]
@@ -85,6 +86,8 @@ MONOCULAR_RETRIES = 1
 #: A frame of several views searched again (``FitOptions.retries``) scores this many of the
 #: library's best matches, the families the last attempt started from left out.
 RETRY_SHORTLIST = 24
+#: Library families whose start looks for a seat before the search (:func:`studio.fit.props.find_support`).
+SEATED_STARTS = ("seated",)
 
 
 @dataclass(frozen=True, eq=False)
@@ -136,72 +139,6 @@ class FrameFit:
             timings=obj["timings"], n_evaluations=int(obj["n_evaluations"]), settings=obj.get("settings", {}),
             quality=obj.get("quality") or {},
         )
-
-
-def _part_groups() -> list[list[int]]:
-    """Pose indices grouped from the torso outward (thesis §4.7.4)."""
-    sl = pose_slices()
-    idx = {p: list(range(sl[p].start, sl[p].stop)) for p in range(1, 15)}
-    names = ("pelvis", "torso", "head", "upperarm_l", "lowerarm_l", "hand_l", "upperarm_r", "lowerarm_r",
-             "hand_r", "upperleg_l", "lowerleg_l", "foot_l", "upperleg_r", "lowerleg_r", "foot_r")
-    n = {name: i for i, name in enumerate(names)}
-    return [
-        idx[n["torso"]] + idx[n["upperarm_l"]] + idx[n["upperarm_r"]] + idx[n["upperleg_l"]] + idx[n["upperleg_r"]],
-        idx[n["lowerarm_l"]] + idx[n["lowerarm_r"]] + idx[n["lowerleg_l"]] + idx[n["lowerleg_r"]],
-        idx[n["hand_l"]] + idx[n["hand_r"]] + idx[n["foot_l"]] + idx[n["foot_r"]] + idx[n["head"]],
-    ]
-
-
-def _partitions() -> list[list[int]]:
-    """Pose index groups of the partitioned particle filter: root + spine + head, then each
-    arm and each leg (one limb at a time: 5 angles, so 40 particles cover it)."""
-    sl = pose_slices()
-
-    def idx(*parts):
-        return [i for p in parts for i in range(sl[p].start, sl[p].stop)]
-
-    return [list(range(3)) + idx(0, 1, 2), idx(3, 4, 5), idx(6, 7, 8), idx(9, 10, 11), idx(12, 13, 14)]
-
-
-def _partitioned_search(cost, x, sigma, lo, hi, groups, *, n_particles, n_layers, rng) -> tuple[np.ndarray, float]:
-    """Deutscher's partitioned annealed particle filter: re-search each index group of ``x``
-    in turn with the others held; a group's answer is kept only if it lowers ``cost``
-    ((N, D) → (N,)). Returns the parameters and their cost."""
-    x = np.asarray(x, dtype=np.float64).copy()
-    current = float(cost(x[None])[0])
-    for idx in groups:
-        idx = np.asarray(idx)
-
-        def sub(Z, idx=idx, base=x.copy()):
-            X = np.repeat(base[None], len(Z), axis=0)
-            X[:, idx] = Z
-            return cost(X)
-
-        r = annealed_particle_filter(sub, x[idx], sigma[idx], bounds=(lo[idx], hi[idx]), n_particles=n_particles,
-                                     n_layers=n_layers, vectorized=True, seed=rng)
-        if r.cost < current:
-            x[idx], current = r.x, float(r.cost)
-    return x, current
-
-
-def _heading(pose: np.ndarray) -> float:
-    """Root yaw (rad) of ``pose``: the angle about z that turns the template's facing
-    direction (-y) into the body's (the root rotation's tilt ignored)."""
-    from calibration.rotation import rotvec_to_matrix
-
-    f = rotvec_to_matrix(np.asarray(pose[3:6], dtype=np.float64)) @ [0.0, -1.0, 0.0]
-    return float(np.arctan2(f[1], f[0]) + np.pi / 2)
-
-
-def _pose_sigma(scale: float) -> np.ndarray:
-    """Initial particle spread per pose entry (translation m, angles rad) times ``scale``."""
-    s = np.empty(POSE_SIZE)
-    s[:2], s[2] = 0.06, 0.02
-    s[3:5], s[5] = 0.06, 0.25
-    for p, kind in enumerate(JOINT_KIND):
-        if kind != "root":
-            s[pose_slices()[p]] = 0.25
-    return s * scale
 
 
 def build_targets(masks, names, options: FitOptions, ignore=None) -> dict:
@@ -342,9 +279,11 @@ def fit_frame(
             hint = np.asarray(hint_pose, dtype=np.float64).copy()
             hint[:2] = starts[0, :2]
             starts = np.vstack([hint[None], starts])
-        if options.find_support and start_family is not None:
+        if options.find_support and start_family in SEATED_STARTS:
             # a start that sits on a prop the silhouettes hold (a stool): the search leaves the
-            # pixels under its seat out too, else it drags the legs onto the stool
+            # pixels under its seat out too, else it drags the legs onto the stool (dev seated
+            # frames: 57.8 / 52.1 → 23.4 / 13.3 mm). Not from a squat start: placed roughly, its
+            # own calves fill the region under its seat (dev half squat 11.6 → 13.4 mm)
             early = find_support(model, cameras, masks, base_shape, model.clip_pose(starts[0]))
             if early is not None:
                 targets = build_targets(masks, [c.name for c in cameras], options, ignore=early.ignore)

@@ -114,7 +114,7 @@ def test_a_fit_of_several_views_explaining_them_poorly_is_searched_again_from_ot
     np.testing.assert_allclose(fit.costs["attempt_costs"], [once.costs["total"], again.costs["total"]], rtol=1e-12)
     assert fit.costs["total"] == min(once.costs["total"], again.costs["total"])
     assert fit.timings["cpu_all_attempts"] > fit.timings["cpu"] > 0
-    assert fit.timings["all_attempts"] == pytest.approx(once.timings["total"] + again.timings["total"], rel=0.5)
+    assert fit.timings["all_attempts"] > fit.timings["total"] > 0
 
 
 def test_initial_heading_of_a_walker_in_mid_stride(scene):

@@ -49,7 +49,7 @@ import numpy as np
 
 from studio.blas import one_blas_thread
 from studio.body import BodyModel
-from studio.body.skeleton import JOINT_KIND, POSE_SIZE, pose_slices
+from studio.body.skeleton import POSE_SIZE
 from studio.cost import SilhouetteTarget
 from studio.fit.errors import FitError, UnusableFrame
 from studio.body.inverse import shape_from_measurements
@@ -59,6 +59,7 @@ from studio.fit.objective import CylinderObjective, FrameObjective, pose_bounds
 from studio.fit.options import FitOptions
 from studio.fit.props import find_support
 from studio.fit.quality import fit_quality, refused_quality, screen_masks
+from studio.fit.search import _heading, _part_groups, _partitioned_search, _partitions, _pose_sigma
 from studio.optimize import Stage, annealed_particle_filter, staged_nelder_mead, thesis_stages
 
 __all__ = ["FitOptions", "FrameFit", "fit_frame", "fit_frame_gender"]
@@ -82,6 +83,11 @@ MONOCULAR_DEPTHS = (-0.3, -0.2, -0.1, 0.0, 0.1, 0.2, 0.3)
 #: cost is kept. The search from one view is chaotic: costs changed by 1e-9 (a faster cost, same
 #: arithmetic) turned a 43 mm fit into a 246 mm one, and the fit's own cost tells them apart.
 MONOCULAR_RETRIES = 1
+#: A frame of several views searched again (``FitOptions.retries``) scores this many of the
+#: library's best matches, the families the last attempt started from left out.
+RETRY_SHORTLIST = 24
+#: Library families whose start looks for a seat before the search (:func:`studio.fit.props.find_support`).
+SEATED_STARTS = ("seated",)
 
 
 @dataclass(frozen=True, eq=False)
@@ -135,72 +141,6 @@ class FrameFit:
         )
 
 
-def _part_groups() -> list[list[int]]:
-    """Pose indices grouped from the torso outward (thesis §4.7.4)."""
-    sl = pose_slices()
-    idx = {p: list(range(sl[p].start, sl[p].stop)) for p in range(1, 15)}
-    names = ("pelvis", "torso", "head", "upperarm_l", "lowerarm_l", "hand_l", "upperarm_r", "lowerarm_r",
-             "hand_r", "upperleg_l", "lowerleg_l", "foot_l", "upperleg_r", "lowerleg_r", "foot_r")
-    n = {name: i for i, name in enumerate(names)}
-    return [
-        idx[n["torso"]] + idx[n["upperarm_l"]] + idx[n["upperarm_r"]] + idx[n["upperleg_l"]] + idx[n["upperleg_r"]],
-        idx[n["lowerarm_l"]] + idx[n["lowerarm_r"]] + idx[n["lowerleg_l"]] + idx[n["lowerleg_r"]],
-        idx[n["hand_l"]] + idx[n["hand_r"]] + idx[n["foot_l"]] + idx[n["foot_r"]] + idx[n["head"]],
-    ]
-
-
-def _partitions() -> list[list[int]]:
-    """Pose index groups of the partitioned particle filter: root + spine + head, then each
-    arm and each leg (one limb at a time: 5 angles, so 40 particles cover it)."""
-    sl = pose_slices()
-
-    def idx(*parts):
-        return [i for p in parts for i in range(sl[p].start, sl[p].stop)]
-
-    return [list(range(3)) + idx(0, 1, 2), idx(3, 4, 5), idx(6, 7, 8), idx(9, 10, 11), idx(12, 13, 14)]
-
-
-def _partitioned_search(cost, x, sigma, lo, hi, groups, *, n_particles, n_layers, rng) -> tuple[np.ndarray, float]:
-    """Deutscher's partitioned annealed particle filter: re-search each index group of ``x``
-    in turn with the others held; a group's answer is kept only if it lowers ``cost``
-    ((N, D) → (N,)). Returns the parameters and their cost."""
-    x = np.asarray(x, dtype=np.float64).copy()
-    current = float(cost(x[None])[0])
-    for idx in groups:
-        idx = np.asarray(idx)
-
-        def sub(Z, idx=idx, base=x.copy()):
-            X = np.repeat(base[None], len(Z), axis=0)
-            X[:, idx] = Z
-            return cost(X)
-
-        r = annealed_particle_filter(sub, x[idx], sigma[idx], bounds=(lo[idx], hi[idx]), n_particles=n_particles,
-                                     n_layers=n_layers, vectorized=True, seed=rng)
-        if r.cost < current:
-            x[idx], current = r.x, float(r.cost)
-    return x, current
-
-
-def _heading(pose: np.ndarray) -> float:
-    """Root yaw (rad) of ``pose``: the angle about z that turns the template's facing
-    direction (-y) into the body's (the root rotation's tilt ignored)."""
-    from calibration.rotation import rotvec_to_matrix
-
-    f = rotvec_to_matrix(np.asarray(pose[3:6], dtype=np.float64)) @ [0.0, -1.0, 0.0]
-    return float(np.arctan2(f[1], f[0]) + np.pi / 2)
-
-
-def _pose_sigma(scale: float) -> np.ndarray:
-    """Initial particle spread per pose entry (translation m, angles rad) times ``scale``."""
-    s = np.empty(POSE_SIZE)
-    s[:2], s[2] = 0.06, 0.02
-    s[3:5], s[5] = 0.06, 0.25
-    for p, kind in enumerate(JOINT_KIND):
-        if kind != "root":
-            s[pose_slices()[p]] = 0.25
-    return s * scale
-
-
 def build_targets(masks, names, options: FitOptions, ignore=None) -> dict:
     """{level: SilhouetteTarget} of the observed ``masks`` at the levels of ``options``
     (``ignore``: per view, observed pixels the body need not explain, e.g. a stool)."""
@@ -227,6 +167,7 @@ def fit_frame(
     ground=None,
     light_uncertainty: dict | None = None,
     _attempt: int = 0,
+    _avoid: tuple[str, ...] = (),
 ) -> FrameFit:
     """Fit ``model`` to one frame's observed silhouettes.
 
@@ -287,7 +228,7 @@ def fit_frame(
             axis = xy - np.asarray(cameras[0].center, dtype=np.float64)[:2]
             floor = xy + np.outer(MONOCULAR_DEPTHS, axis / np.linalg.norm(axis))
         match = library_match(model, cameras, masks, floor, shape=shape, shadows=views,
-                              shortlist=12 if len(cameras) > 1 else MONOCULAR_SHORTLIST)
+                              shortlist=(RETRY_SHORTLIST if _avoid else 12) if len(cameras) > 1 else MONOCULAR_SHORTLIST)
         xy = match["xy"]
     if shape is not None:
         base_shape = model.check_shape(shape)
@@ -304,11 +245,17 @@ def fit_frame(
     targets = build_targets(masks, [c.name for c in cameras], options)
     n_free = options.n_shape_free if options.fit_shape else 0
     n_free = min(n_free, model.n_shape)
-    pose_obj = FrameObjective(model, cameras, targets, base_shape, 0, options.prior_weight, shadow=shadow)
-    # the global search scores the 15-cone model (§4.8.1) by default; the heading grid, the
-    # check of the cones' answer and the partitioned passes score SCAPE
-    apf_obj = (CylinderObjective(model, cameras, targets, base_shape, 0, options.prior_weight, shadow=shadow)
-               if options.search_model == "cylinder" else pose_obj)
+
+    def objectives(targets):
+        """(SCAPE, search) objectives of the pose: the global search scores the 15-cone model
+        (§4.8.1) by default; the heading grid, the check of the cones' answer and the
+        partitioned passes score SCAPE."""
+        scape = FrameObjective(model, cameras, targets, base_shape, 0, options.prior_weight, shadow=shadow)
+        return scape, (CylinderObjective(model, cameras, targets, base_shape, 0, options.prior_weight, shadow=shadow)
+                       if options.search_model == "cylinder" else scape)
+
+    pose_obj, apf_obj = objectives(targets)
+    early, n_early = None, 0
     timings["targets"] = time.perf_counter() - t_start
 
     # -- initialisation + particle filter on the pose (shape held)
@@ -321,6 +268,9 @@ def fit_frame(
             cand = stand_on_floor(model, base_shape, match["poses"])
             X = np.stack([pose_obj.pack(base_shape, p) for p in cand])
             families = list(match["families"])
+            keep = [i for i, f in enumerate(families) if f not in _avoid]
+            if len(keep) < len(families) and keep:  # a retry: the postures the last attempt started from are left out
+                X, families = X[keep], [families[i] for i in keep]
             if len(cameras) == 1:  # one view: the heading grid's strides compete with the library's postures
                 X, families = np.vstack([X, grid]), families + ["stride"] * len(grid)
             order = np.argsort(pose_obj(X, search))[:4]
@@ -329,6 +279,16 @@ def fit_frame(
             hint = np.asarray(hint_pose, dtype=np.float64).copy()
             hint[:2] = starts[0, :2]
             starts = np.vstack([hint[None], starts])
+        if options.find_support and start_family in SEATED_STARTS:
+            # a start that sits on a prop the silhouettes hold (a stool): the search leaves the
+            # pixels under its seat out too, else it drags the legs onto the stool (dev seated
+            # frames: 57.8 / 52.1 → 23.4 / 13.3 mm). Not from a squat start: placed roughly, its
+            # own calves fill the region under its seat (dev half squat 11.6 → 13.4 mm)
+            early = find_support(model, cameras, masks, base_shape, model.clip_pose(starts[0]))
+            if early is not None:
+                targets = build_targets(masks, [c.name for c in cameras], options, ignore=early.ignore)
+                n_early += pose_obj.n_evaluations + (apf_obj.n_evaluations if apf_obj is not pose_obj else 0)
+                pose_obj, apf_obj = objectives(targets)
         sigma = _pose_sigma(1.0)
         n_p, n_l = options.n_particles, options.n_layers
         if len(cameras) == 1:  # one view leaves depth, heading and which leg is which open: search wider
@@ -381,7 +341,7 @@ def fit_frame(
     if options.find_support:
         # a seated body rests on something the silhouettes hold too (a stool): what is observed
         # under its seat becomes a don't-care region of the cost from here on
-        support = find_support(model, cameras, masks, base_shape, model.clip_pose(x_pose))
+        support = find_support(model, cameras, masks, base_shape, model.clip_pose(x_pose)) or early
         if support is not None:
             targets = build_targets(masks, [c.name for c in cameras], options, ignore=support.ignore)
 
@@ -440,24 +400,35 @@ def fit_frame(
     fit = FrameFit(
         frame=int(frame), gender=model.gender, shape=shape_out, pose=pose_out,
         joints=model.joints(shape_out, pose_out), costs=costs, timings={k: round(v, 4) for k, v in timings.items()},
-        n_evaluations=int(pose_obj.n_evaluations + obj.n_evaluations
+        n_evaluations=int(n_early + pose_obj.n_evaluations + obj.n_evaluations
                           + (apf_obj.n_evaluations if apf_obj is not pose_obj else 0)), settings=options.to_dict(),
         quality=quality,
     )
-    if previous_pose is None and len(cameras) == 1 and _attempt < MONOCULAR_RETRIES and _explains_poorly(quality):
-        # one view's search is the least reliable: a body that explains its silhouette poorly is
-        # searched again with other random draws, and the lower total cost is kept
-        log.info("frame %d: the fitted body explains its view poorly: searching again", frame)
+    retries = MONOCULAR_RETRIES if len(cameras) == 1 else options.retries
+    if previous_pose is None and _attempt < retries and _explains_poorly(quality):
+        # a body that explains the silhouettes poorly is searched again with other random draws
+        # (several views: from the library's other postures too) and the lower total cost is kept
+        log.info("frame %d: the fitted body explains its views poorly: searching again", frame)
+        avoid = _avoid + ((start_family,) if len(cameras) > 1 and start_family is not None else ())
         again = fit_frame(model, given[0], given[1], frame=frame, shape=shape, hint_pose=hint_pose, options=options,
                           seed=np.random.default_rng(seed).integers(2**31), screen=screen, lights=lights,
                           shadow_masks=shadow_masks, shadow_weight=shadow_weight, ground=ground,
-                          light_uncertainty=light_uncertainty, _attempt=_attempt + 1)
-        tries = [fit.costs["total"], again.costs["total"]]
-        spent = fit.timings["total"] + again.timings["total"]
-        fit = min((fit, again), key=lambda r: r.costs["total"])
-        fit.costs["attempt_costs"] = tries
-        fit.timings["all_attempts"] = round(spent, 4)
+                          light_uncertainty=light_uncertainty, _attempt=_attempt + 1, _avoid=avoid)
+        fit = _keep_best(fit, again)
     return fit
+
+
+def _keep_best(fit: FrameFit, again: FrameFit) -> FrameFit:
+    """The attempt with the lower total cost (eq. 4.6), every attempt's cost and the time they
+    took together recorded on it (``attempt_costs``, ``all_attempts``, ``cpu_all_attempts``)."""
+    tries = fit.costs.get("attempt_costs", [fit.costs["total"]]) + again.costs.get("attempt_costs", [again.costs["total"]])
+    spent = [r.timings.get(k, r.timings[base]) for r in (fit, again)
+             for k, base in (("all_attempts", "total"), ("cpu_all_attempts", "cpu"))]
+    best = min((fit, again), key=lambda r: r.costs["total"])
+    best.costs["attempt_costs"] = tries
+    best.timings["all_attempts"] = round(spent[0] + spent[2], 4)
+    best.timings["cpu_all_attempts"] = round(spent[1] + spent[3], 4)
+    return best
 
 
 def _explains_poorly(quality: dict) -> bool:

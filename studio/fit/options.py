@@ -47,6 +47,13 @@ class FitOptions:
     ``start``: how a frame fitted from its silhouettes starts — ``"library"`` (the lab posture
     library matched to the silhouettes, :mod:`studio.fit.library`) or ``"stride"`` (12 headings
     × standing / stride postures, :func:`studio.fit.init.initial_poses`).
+    ``retries``: a frame of several views fitted from its silhouettes whose body explains them
+    poorly (the agreement gates) is searched again up to this many times, with other random
+    draws and from the library's postures other than those the last attempt started from; the
+    lowest total cost is kept (one view: ``studio.fit.frame.MONOCULAR_RETRIES``). Off by default:
+    on the dev people (24 frames, 4 flagged) one retry kept the first attempt on 3 flagged frames
+    and on the 4th reached a lower cost but a worse body (half squat 34.4 → 37.3 mm), for twice
+    the CPU on every flagged frame.
 
     Frames fitted alone from the silhouettes (walk, frames 0/6/12/18/21): with the cone search,
     stride postures and the limb re-search the joint error was 17/13/29/29/21 mm; SCAPE search
@@ -75,6 +82,7 @@ class FitOptions:
     search_model: str = "cylinder"
     start: str = "library"
     find_support: bool = True
+    retries: int = 0
 
     def __post_init__(self):
         if self.search_model not in ("scape", "cylinder"):

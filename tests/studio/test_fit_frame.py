@@ -91,6 +91,32 @@ def test_fit_is_deterministic_under_a_seed(scene):
     assert joint_error(model, model.vertices(track.shape, track.pose), V)[0] < 0.03
 
 
+def test_a_fit_of_several_views_explaining_them_poorly_is_searched_again_from_other_postures(scene):
+    """A frame of several views whose fitted body the agreement gates flag is searched again with
+    other draws, the library posture the first attempt started from left out; the lower total
+    cost is kept, both attempts' costs and CPU recorded."""
+    from dataclasses import replace
+
+    from studio.fit.frame import _explains_poorly
+
+    model, cams, shape, pose, V, masks = scene
+    tiny = FitOptions(levels=(2, 2, 2), n_particles=8, n_layers=1, nm_evaluations=4, final_evaluations=4,
+                      n_shape_free=0, partition_particles=0, partition_layers=0, limb_particles=0,
+                      rival_heading=False, find_support=False)
+    assert tiny.retries == 0  # off by default
+    once = fit_frame(model, cams, masks, options=tiny, seed=3)
+    assert _explains_poorly(once.quality) and "attempt_costs" not in once.costs
+    first = once.costs["start_family"]
+    again = fit_frame(model, cams, masks, options=tiny, seed=np.random.default_rng(3).integers(2**31),
+                      _attempt=1, _avoid=(first,))
+    assert again.costs["start_family"] != first
+    fit = fit_frame(model, cams, masks, options=replace(tiny, retries=1), seed=3)
+    np.testing.assert_allclose(fit.costs["attempt_costs"], [once.costs["total"], again.costs["total"]], rtol=1e-12)
+    assert fit.costs["total"] == min(once.costs["total"], again.costs["total"])
+    assert fit.timings["cpu_all_attempts"] > fit.timings["cpu"] > 0
+    assert fit.timings["all_attempts"] > fit.timings["total"] > 0
+
+
 def test_initial_heading_of_a_walker_in_mid_stride(scene):
     """A stride seen in the standing posture looks best side-on; the stride postures fix it."""
     from studio.body.skeleton import pose_slices

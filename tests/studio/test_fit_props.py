@@ -56,3 +56,38 @@ def test_no_support_without_a_prop(model, family):
         assert max(angles) < MIN_THIGH_ANGLE
     else:  # a squat sits as low as a stool; nothing is observed under it
         assert min(angles) > MIN_THIGH_ANGLE
+
+
+def test_a_seated_start_searches_with_the_stool_left_out(model, monkeypatch):
+    """A library start that sits on a stool the silhouettes hold: the search itself leaves the
+    pixels under its seat out (not only the Nelder–Mead stages after it), so the legs are not
+    dragged onto the stool: the search's cost no longer counts the stool."""
+    import studio.fit.frame as frame
+    from studio.fit import FitOptions
+    from studio.fit.evaluate import surface_distance
+
+    cams = ring_cameras()
+    pose, V = posed(model, "seated")
+    Vs, Fs = stool_mesh(*seat_of(V, model.parts, STOOL_RADIUS))
+    masks = [silhouette(c, V, model.faces) | silhouette(c, Vs, Fs) for c in cams]
+    opts = FitOptions(levels=(2, 2, 2), n_particles=12, n_layers=2, nm_evaluations=10, final_evaluations=10,
+                      n_shape_free=0, partition_particles=0, partition_layers=0, limb_particles=0,
+                      rival_heading=False, retries=0)
+    seen, real = [], frame.find_support
+
+    def spy(model, cameras, masks, shape, pose, late_only=False):
+        seen.append(min(thigh_angles(model, shape, pose)))
+        return None if late_only and len(seen) == 1 else real(model, cameras, masks, shape, pose)
+
+    monkeypatch.setattr(frame, "find_support", spy)
+    fit = frame.fit_frame(model, cams, masks, shape=model.mean_shape(), options=opts, seed=2)
+    assert fit.costs["start_family"] == "seated" and len(seen) == 2 and seen[0] > MIN_THIGH_ANGLE
+    assert "support" in fit.quality
+    seen.clear()
+    monkeypatch.setattr(frame, "find_support", lambda *a: spy(*a, late_only=True))
+    late = frame.fit_frame(model, cams, masks, shape=model.mean_shape(), options=opts, seed=2)
+    assert late.costs["start_family"] == "seated" and "support" in late.quality
+    # the stool searched as body costs the search; left out, the search's best costs far less
+    assert fit.costs["search"] < 0.8 * late.costs["search"], (fit.costs["search"], late.costs["search"])
+    for f in (fit, late):  # both end on the seated body (own model, stool left out at the end)
+        assert surface_distance(model.vertices(f.shape, f.pose), model.faces, V, model.faces, n=8000) < 0.03

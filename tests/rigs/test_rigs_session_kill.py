@@ -24,7 +24,17 @@ _spec.loader.exec_module(kw)
 KILLS = 5
 
 
-def _run_and_kill(path: Path, durability: str, delay: float) -> None:
+def _frames_listed(path: Path) -> int:
+    """Rows after the header of the session's ``frames.csv`` (0 before it exists)."""
+    try:
+        return max(len((path / "frames.csv").read_text().splitlines()) - 1, 0)
+    except FileNotFoundError:
+        return 0
+
+
+def _run_and_kill(path: Path, durability: str, delay: float, after_frames: int = 0) -> None:
+    """SIGKILL the writer ``delay`` s after it created the session (and, with ``after_frames``,
+    listed that many frames: on a loaded machine start-up alone can outlast every delay)."""
     proc = subprocess.Popen(
         [sys.executable, str(HELPER), str(path), durability],
         stdout=subprocess.DEVNULL,
@@ -32,11 +42,11 @@ def _run_and_kill(path: Path, durability: str, delay: float) -> None:
     )
     try:
         deadline = time.monotonic() + 30.0
-        while not (path / "session.json").exists():
+        while not (path / "session.json").exists() or _frames_listed(path) < after_frames:
             if proc.poll() is not None:
                 raise AssertionError(f"writer exited early: {proc.stderr.read().decode()}")
             if time.monotonic() > deadline:
-                raise AssertionError("writer did not create the session within 30 s")
+                raise AssertionError(f"writer did not create the session and list {after_frames} frames within 30 s")
             time.sleep(0.002)
         time.sleep(delay)
     finally:
@@ -81,7 +91,8 @@ def test_sigkill_at_random_instants_leaves_only_complete_pixel_exact_frames(tmp_
     counts = []
     for k, delay in enumerate(delays):
         path = tmp_path / f"run{k}"
-        _run_and_kill(path, "fsync" if k == KILLS - 1 else "rename", float(delay))
+        last = k == KILLS - 1  # killed once frames are being written, whatever the load
+        _run_and_kill(path, "fsync" if last else "rename", float(delay), after_frames=int(last))
         counts.append(_check_session(path))
     # the test is only meaningful if kills landed while frames were being written
     assert max(counts) > 0, counts

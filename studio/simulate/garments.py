@@ -18,9 +18,11 @@ hangs away below. A clothed vertex whose posed surface faces up (outward normal 
 ``n · down ≤ -0.8``, within 37° of straight up: shoulders, the top of the upper chest, the top of
 a raised arm's sleeve) carries the cloth (gap 0); one facing sideways or down (``n · down ≥ 0``)
 gets the full looseness, smoothly between (:func:`gravity_gap`). The cut holds the garment at
-its openings whatever the posture: a shirt's collar (zero gap above 0.85 of stature in the rest
-pose, growing to full 0.2 of stature below it — the cloth hanging from the shoulders) and the
-trousers' waistband, hips and seat (zero at the waist, full at the crotch) (:func:`cut_gap`).
+its openings whatever the posture: a top's collar (zero gap above 0.85 of stature in the rest
+pose, growing to full 0.2 of stature below it — the cloth hanging from the shoulders; by rest
+height, so a sleeve is held at its shoulder seam too) and the trousers' waistband, hips and seat
+(zero at the waist, about half over the hips, full at the crotch) (:func:`cut_gap`). Under a
+long shirt or a jacket the hips are the top's and hang.
 The factor is smoothed over each garment (a few one-ring averages) so it has no creases.
 It is geometry, not cloth simulation: no folds, no swing, no self-collision, no friction; the cloth
 never falls *inside* the body and a skirt stays the flared tube of :func:`skirt_mesh`.

@@ -1,6 +1,7 @@
 """Shape under clothing: the multi-pose batch vs single-pose fits (thesis ch. 6, §6.4).
 
-Generated Anny people (seeds from 2000 up, never used for tuning; both sexes alternate, adult
+Generated Anny people (seeds from 2000 up, never used for tuning — ``--split dev`` draws seeds
+from 3000 up into its own cache folder to choose settings on; both sexes alternate, adult
 ages, Anny's population statures and BMIs), each in ``--poses`` lab postures (standing families
 of ``studio.simulate.truth_build.LAB_POSES``, jittered, random heading), rendered twice: **tight**
 (short sleeves, trousers, no looseness) and **loose** (3.5 cm, a garment drawn per person: long
@@ -48,6 +49,9 @@ sys.path.insert(0, str(ROOT))
 sys.path.insert(0, str(ROOT / "benchmarks"))
 
 FIRST_SEED = 2000
+#: First seed of each split: ``report`` (the reported figures, never tuned on), ``dev`` (settings
+#: are chosen on these; its own cache folder).
+SPLIT_SEEDS = {"report": FIRST_SEED, "dev": 3000}
 FAMILIES = ("a_pose", "t_pose", "arms_overhead", "hands_on_hips", "arm_forward", "wide_stance", "lunge",
             "torso_twist", "walk", "run", "arms_crossed")
 QUICK_FAMILIES = ("t_pose", "hands_on_hips", "wide_stance", "walk")
@@ -57,8 +61,8 @@ MEASURES = ("stature", "chest_circumference", "waist_circumference", "hip_circum
 THESIS_GENDER = {"single": 86.0, "vote": 90.6, "batch": 94.3}
 
 
-#: ``full`` or ``quick`` (set by ``--quick``): the two runs keep separate caches.
-RUN = {"name": "full"}
+#: ``full`` or ``quick`` (set by ``--quick``), ``dev-`` in front for the dev split: separate caches.
+RUN = {"name": "full", "first_seed": FIRST_SEED}
 
 
 def bench_root() -> Path:
@@ -70,13 +74,14 @@ def bench_root() -> Path:
 def subjects(n: int, n_poses: int, quick: bool) -> list[dict]:
     fams = QUICK_FAMILIES if quick else FAMILIES
     out = []
+    first = RUN["first_seed"]
     for i in range(n):
-        rng = np.random.default_rng(FIRST_SEED + i)
+        rng = np.random.default_rng(first + i)
         female = bool(i % 2)
         garments = [g for g in GARMENTS if female or g[1] != "skirt"]
         top, bottom = garments[int(rng.integers(len(garments)))]
         out.append({
-            "name": f"subject_{i:03d}", "seed": FIRST_SEED + i, "gender": float(female),
+            "name": f"subject_{i:03d}", "seed": first + i, "gender": float(female),
             "poses": [fams[(i + j) % len(fams)] for j in range(min(n_poses, len(fams)))],
             "skin_tone": round(float(rng.uniform(0.05, 0.95)), 2),
             "top": [int(v) for v in rng.integers(20, 220, 3)], "bottom": [int(v) for v in rng.integers(20, 160, 3)],
@@ -317,10 +322,15 @@ def main(argv=None) -> int:
     ap.add_argument("--conditions", nargs="+", default=["tight", "loose"], choices=["tight", "loose"])
     ap.add_argument("--workers", type=int, default=2)
     ap.add_argument("--real-skin", action="store_true", help="also the skin classifier on ../shared/data/skin")
+    ap.add_argument("--split", choices=sorted(SPLIT_SEEDS), default="report",
+                    help="report: seeds 2000+ (the reported figures); dev: seeds 3000+ (choose settings here)")
     args = ap.parse_args(argv)
     if args.quick:
         args.subjects, args.poses = 2, 4
         RUN["name"] = "quick"
+    RUN["first_seed"] = SPLIT_SEEDS[args.split]
+    if args.split != "report":
+        RUN["name"] = f"{args.split}-{RUN['name']}"
     return {"build": build, "run": run, "table": table}[args.step](args)
 
 

@@ -132,7 +132,8 @@ def fit_batch_session(
     fit_session(ws, frames=cands, gender=gender, workers=workers, scheduler=scheduler, options=single_options,
                 chain_length=chain_length or CHAIN_LENGTH, seed=seed, force=force, progress=progress)
     fits = load_fits(ws, cands)
-    chosen = choose_frames(fits, n_frames) if frames is None else [f for f in cands if f in fits]
+    chosen = (choose_frames(fits, n_frames, loose=clothing != "tight") if frames is None
+              else [f for f in cands if f in fits])
     if len(chosen) < 2:
         raise FitError(f"{ws.path}: fewer than two fitted frames for the batch ({chosen})")
     cameras_of = {}

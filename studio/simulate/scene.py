@@ -15,7 +15,7 @@ import numpy as np
 
 from calibration import Camera, GroundPlane, RigCalibration
 from studio.render import PointLight, light_from_dict, rasterize, shade_raster, shadow_mask, vertex_normals
-from studio.simulate.garments import adjust_labels, garment_offsets, skirt_mesh
+from studio.simulate.garments import adjust_labels, drape, garment_offsets, skirt_mesh
 from studio.simulate.props import stool_mesh
 from studio.simulate.spec import SimSpec, SpecError
 
@@ -328,9 +328,16 @@ class Scene:
         return self.body.vertices[frame]
 
     def dressed(self, frame: int) -> np.ndarray:
+        """(V, 3) vertices of body frame ``frame`` with the garments on: each clothed vertex out
+        along its normal by its garment's looseness times the posture's drape
+        (:func:`studio.simulate.garments.drape`: cloth rests where the body carries it)."""
         person = self.spec["person"]
         offsets = garment_offsets(self.labels, self.body.rest_height, person, LABEL_TOP, LABEL_BOTTOM)
-        return dress(self.body.vertices[frame].astype(np.float64), self.body.faces, self.labels, offsets)
+        V = self.body.vertices[frame].astype(np.float64)
+        if np.any(offsets > 0):
+            offsets = offsets * drape(vertex_normals(V, self.body.faces), self.body.faces, self.labels,
+                                      self.body.rest_height, LABEL_TOP, LABEL_BOTTOM)
+        return dress(V, self.body.faces, self.labels, offsets)
 
     def skirt(self, frame: int) -> tuple[np.ndarray, np.ndarray] | None:
         """(vertices, faces) of the skirt of body frame ``frame``, or None (no skirt)."""

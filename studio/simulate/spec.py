@@ -40,6 +40,9 @@ SPEC_VERSION = 1
 #: Garments (``person.top.kind``, ``person.bottom.kind``), see :mod:`studio.simulate.garments`.
 TOP_KINDS = ("shirt", "long_shirt", "jacket")
 BOTTOM_KINDS = ("trousers", "wide_trousers", "skirt")
+#: Version of the loose garment model (part of a loosely dressed spec's cache key): "drape 1" = the
+#: posture-dependent drape of :func:`studio.simulate.garments.drape`.
+GARMENT_MODEL = "drape 1"
 
 
 class SpecError(ValueError):
@@ -123,8 +126,12 @@ class SimSpec:
         return p if p.is_absolute() else self.folder / p
 
     def digest(self) -> str:
-        """Hash of the spec content and of the body file (cache key)."""
+        """Hash of the spec content and of the body file (cache key); a loosely dressed person's
+        also of the garment model's version (:data:`GARMENT_MODEL`: loose renders made before the
+        drape are not reused)."""
         h = hashlib.sha256(json.dumps(self.data, sort_keys=True).encode())
+        if float(self.data["person"]["looseness"]) > 0:
+            h.update(GARMENT_MODEL.encode())
         body = self.body_path
         if body.is_file():
             h.update(body.read_bytes())

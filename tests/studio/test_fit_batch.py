@@ -113,3 +113,24 @@ def test_frame_choice_and_bad_options(frames):
         batch_fit([])
     with pytest.raises(FitError, match="gender: expected auto"):
         batch_fit([fr["A0"][0]], gender="robot")
+
+
+def test_loose_batch_takes_frames_failed_only_by_the_clothes(frames):
+    """Loose clothing fattens single-frame fits past the population gate: with fewer than two
+    usable frames a loose batch takes those (never a frame failed by its views or segmentation)."""
+    from dataclasses import replace
+
+    _, fr = frames
+
+    def failed(fit, *checks):
+        reasons = [{"check": c, "severity": "failed", "view": None, "message": c} for c in checks]
+        return replace(fit, quality={"version": 1, "status": "failed", "reasons": reasons})
+
+    base = [fr[k][3] for k in ("A0", "A1", "B0")]
+    fits = {0: failed(base[0], "population"), 1: failed(base[1], "agreement", "population"),
+            2: failed(base[2], "hull")}
+    assert choose_frames(fits, 3, loose=True) == [0, 1]
+    with pytest.raises(FitError, match="no single-frame fit passed the quality gates"):
+        choose_frames(fits, 3)
+    fits[2] = base[2]  # one good frame: still fewer than two, the clothes-failed ones join it
+    assert choose_frames(fits, 3, loose=True) == [0, 1, 2] and choose_frames(fits, 3) == [2]

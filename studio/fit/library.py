@@ -266,7 +266,7 @@ def _library_bodies(model, shape, library, n_points: int):
 
 
 def library_match(model, cameras, masks, xy, *, shape=None, scales=SCALES, n_headings: int = 12,
-                  shortlist: int = 12, n_points: int = 1200, factor: int = 8, per_family: int | None = 3,
+                  shortlist: int = 12, n_points: int = 1200, factor: int = 8, per_family: int | None = None,
                   library: tuple[np.ndarray, list[str]] | None = None, shadows: dict | None = None) -> dict:
     """The library postures best matching the silhouettes (:func:`library_scores`), searched
     over posture × stature scale × heading with the bodies of ``shape`` (default: the mean).
@@ -288,9 +288,13 @@ def library_match(model, cameras, masks, xy, *, shape=None, scales=SCALES, n_hea
 
     ``per_family``: at most this many candidates of one family in the shortlist, and a
     symmetric posture's mirror image (the same body, the same score) only once
-    (:func:`_diverse`; None: the plain best ``shortlist``). A forward arm is a few per cent of
-    the points: on the dev ``arm_forward`` frames its family ranked 21st of the candidates, 5th
-    of the families, behind pairs of identical arms-crossed / arms-down bodies that filled the 12.
+    (:func:`_diverse`; None, the default: the plain best ``shortlist``). A forward arm is a few
+    per cent of the points: on a dev ``arm_forward`` frame its family ranked 21st of the
+    candidates, 5th of the families, behind pairs of identical arms-crossed / arms-down bodies
+    that filled the 12; with ``per_family=3`` it enters the shortlist, but the silhouette cost
+    ranks it last (a forward arm a few cm off costs more than a missing one: 19.3 against
+    10.7-15.5 on that frame), so no start changed, and the batch tests' small-budget fits got
+    other (worse) starts: left off.
     """
     from calibration.rotation import matrix_to_rotvec, rotvec_to_matrix
 

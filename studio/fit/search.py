@@ -41,23 +41,29 @@ def _partitioned_search(cost, x, sigma, lo, hi, groups, *, n_particles, n_layers
                         extra=None) -> tuple[np.ndarray, float]:
     """Deutscher's partitioned annealed particle filter: re-search each index group of ``x``
     in turn with the others held; a group's answer is kept only if it lowers ``cost``
-    ((N, D) → (N,)). ``extra``: group number → (K, len(group)) more starts of that group (the
-    mixture of eq. 4.12 around ``x``'s own values and these). Returns the parameters and their cost."""
+    ((N, D) → (N,)). ``extra``: group number → (K, len(group)) other states of that group, searched
+    from (the mixture of eq. 4.12 over them) after the search around ``x``'s own values, the
+    lower cost kept: a small particle budget still refines ``x`` as before. Returns the
+    parameters and their cost."""
     x = np.asarray(x, dtype=np.float64).copy()
     current = float(cost(x[None])[0])
     for g, idx in enumerate(groups):
         idx = np.asarray(idx)
-        x0 = x[idx] if not extra or g not in extra else np.vstack([x[idx][None], extra[g]])
 
         def sub(Z, idx=idx, base=x.copy()):
             X = np.repeat(base[None], len(Z), axis=0)
             X[:, idx] = Z
             return cost(X)
 
-        r = annealed_particle_filter(sub, x0, sigma[idx], bounds=(lo[idx], hi[idx]), n_particles=n_particles,
+        r = annealed_particle_filter(sub, x[idx], sigma[idx], bounds=(lo[idx], hi[idx]), n_particles=n_particles,
                                      n_layers=n_layers, vectorized=True, seed=rng)
         if r.cost < current:
             x[idx], current = r.x, float(r.cost)
+        if extra and g in extra:
+            r = annealed_particle_filter(sub, extra[g], sigma[idx], bounds=(lo[idx], hi[idx]),
+                                         n_particles=n_particles, n_layers=n_layers, vectorized=True, seed=rng)
+            if r.cost < current:
+                x[idx], current = r.x, float(r.cost)
     return x, current
 
 

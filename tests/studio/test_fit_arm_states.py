@@ -1,4 +1,4 @@
-"""Issue 13: the shortlist of distinct families and the library's arm states in the per-limb search."""
+"""Issue 13: the library's arm states in the per-limb search; the (optional) shortlist of distinct families."""
 
 import numpy as np
 import pytest
@@ -36,8 +36,8 @@ def test_shortlist_of_a_symmetric_body_holds_no_twins(model):
     from studio.fit.init import hull_centroid
 
     xy = hull_centroid(cams, masks)
-    plain = library_match(model, cams, masks, xy, per_family=None)
-    diverse = library_match(model, cams, masks, xy)
+    plain = library_match(model, cams, masks, xy)  # the default
+    diverse = library_match(model, cams, masks, xy, per_family=3)
     pairs = lambda m: len(set(zip(m["families"], np.round(m["scores"], 12))))  # noqa: E731
     assert pairs(plain) <= 8  # measured 6: every candidate twice
     assert pairs(diverse) == 12 and len(diverse["families"]) == 12
@@ -72,4 +72,9 @@ def test_extra_starts_leave_a_local_minimum():
     x1, c1 = _partitioned_search(cost, a, sigma, lo, hi, [[0, 1]], rng=np.random.default_rng(0),
                                  extra={0: np.array([[1.9, -1.1], [-2.0, 2.0]])}, **kw)
     assert c0 >= 0.5 and np.linalg.norm(x0 - a) < 0.2
+    # the search around the answer is the one without the extra states (same draws first)
+    x2, c2 = _partitioned_search(cost, a + 0.01, sigma, lo, hi, [[0, 1]], rng=np.random.default_rng(0), **kw)
+    x3, c3 = _partitioned_search(cost, a + 0.01, sigma, lo, hi, [[0, 1]], rng=np.random.default_rng(0),
+                                 extra={0: np.array([[-2.5, 2.5]])}, **kw)
+    np.testing.assert_array_equal(x2, x3)
     assert c1 < 0.05 and np.linalg.norm(x1 - b) < 0.2

@@ -15,8 +15,8 @@ side): ``full`` (library start), ``no-library`` (the stride start of the first w
 ``no-rival`` (no search from the opposite heading), ``no-limb`` (no per-limb re-search),
 ``no-support`` (a seated person's stool fitted as body), ``retry`` (a frame the agreement
 gates flag is searched again, ``FitOptions.retries``), ``arm-states`` (the ``full`` options fitted by
-the code with a shortlist of distinct families and the library's arm states in the per-limb search,
-issue 13: its own folder, so the ``full`` figures of the older code stay as measured). ``--families`` fits only the frames
+the code whose per-limb search also starts each arm from the library's arm states, issue 13: its own
+folder, so the ``full`` figures of the older code stay as measured). ``--families`` fits only the frames
 of the named posture families (e.g. ``--families seated`` for ``no-support``).
 
 Splits (``--split``): ``held-out`` (the default, seeds from 1000, only ever measured: the figures

@@ -14,7 +14,9 @@ Variants (``--variant``, one results folder each, so the gain of every part show
 side): ``full`` (library start), ``no-library`` (the stride start of the first wave),
 ``no-rival`` (no search from the opposite heading), ``no-limb`` (no per-limb re-search),
 ``no-support`` (a seated person's stool fitted as body), ``retry`` (a frame the agreement
-gates flag is searched again, ``FitOptions.retries``). ``--families`` fits only the frames
+gates flag is searched again, ``FitOptions.retries``), ``arm-states`` (the ``full`` options fitted by
+the code whose per-limb search also starts each arm from the library's arm states, issue 13: its own
+folder, so the ``full`` figures of the older code stay as measured). ``--families`` fits only the frames
 of the named posture families (e.g. ``--families seated`` for ``no-support``).
 
 Splits (``--split``): ``held-out`` (the default, seeds from 1000, only ever measured: the figures
@@ -48,7 +50,7 @@ FIRST_SEED = 1000  # held-out people: seeds from here up are only ever measured
 SPLITS = {"held-out": FIRST_SEED, "dev": 100}  # first seed of each split's people
 VARIANTS = {"full": {}, "no-library": {"start": "stride"}, "no-rival": {"rival_heading": False},
             "no-limb": {"limb_particles": 0}, "no-support": {"find_support": False},
-            "retry": {"retries": 1}}
+            "retry": {"retries": 1}, "arm-states": {}}
 STANDING = ("a_pose", "t_pose", "arms_overhead", "hands_on_hips", "arm_forward", "arms_crossed", "wide_stance",
             "torso_twist")
 

@@ -59,7 +59,7 @@ from studio.fit.objective import CylinderObjective, FrameObjective, pose_bounds
 from studio.fit.options import FitOptions
 from studio.fit.props import find_support
 from studio.fit.quality import fit_quality, refused_quality, screen_masks
-from studio.fit.search import _heading, _part_groups, _partitioned_search, _partitions, _pose_sigma
+from studio.fit.search import _arm_states, _heading, _part_groups, _partitioned_search, _partitions, _pose_sigma
 from studio.optimize import Stage, annealed_particle_filter, staged_nelder_mead, thesis_stages
 
 __all__ = ["FitOptions", "FrameFit", "fit_frame", "fit_frame_gender"]
@@ -367,9 +367,13 @@ def fit_frame(
         # way is a local minimum Nelder–Mead cannot leave (measured on the walk: wrist 205 mm off).
         # Tracking too: without it the 24-frame walk's joint error went 17.2 → 19.1 mm and
         # precision 0.961 → 0.956 (the cost rose on 17 of 23 tracked frames)
+        # a fit from the silhouettes alone also starts each arm from the library's arm states: the
+        # whole-body search left the dev arm_forward frames' raised arm hanging (start family
+        # arms_crossed / arms_down: a forward arm a few cm off costs more than a missing one)
+        limbs = _partitions()[1:]
         x_nm, _ = _partitioned_search(lambda X: obj(X, refine), x_nm, np.concatenate([sigma, sig]) * 0.5, blo, bhi,
-                                   _partitions()[1:], n_particles=options.limb_particles,
-                                   n_layers=options.limb_layers, rng=rng)
+                                   limbs, n_particles=options.limb_particles, n_layers=options.limb_layers, rng=rng,
+                                   extra=_arm_states(model, limbs) if previous_pose is None else None)
     timings["nelder_mead"] = time.perf_counter() - t
     t = time.perf_counter()
     last = [Stage(tuple(range(6)) + tuple(shape_idx) + tuple(i for g in _part_groups()[:1] for i in g),

@@ -266,7 +266,7 @@ def _library_bodies(model, shape, library, n_points: int):
 
 
 def library_match(model, cameras, masks, xy, *, shape=None, scales=SCALES, n_headings: int = 12,
-                  shortlist: int = 12, n_points: int = 1200, factor: int = 8,
+                  shortlist: int = 12, n_points: int = 1200, factor: int = 8, per_family: int | None = None,
                   library: tuple[np.ndarray, list[str]] | None = None, shadows: dict | None = None) -> dict:
     """The library postures best matching the silhouettes (:func:`library_scores`), searched
     over posture × stature scale × heading with the bodies of ``shape`` (default: the mean).
@@ -285,6 +285,16 @@ def library_match(model, cameras, masks, xy, *, shape=None, scales=SCALES, n_hea
     frames, among the 4 starts 62 → 81 %, in the shortlist 75 → 94 % (2,400 points: no better;
     ``factor`` 6 or 12: worse or no better). ``shadows``: the shadow camera's views
     (:func:`library_scores`), for a frame fitted with its shadow.
+
+    ``per_family``: at most this many candidates of one family in the shortlist, and a
+    symmetric posture's mirror image (the same body, the same score) only once
+    (:func:`_diverse`; None, the default: the plain best ``shortlist``). A forward arm is a few
+    per cent of the points: on a dev ``arm_forward`` frame its family ranked 21st of the
+    candidates, 5th of the families, behind pairs of identical arms-crossed / arms-down bodies
+    that filled the 12; with ``per_family=3`` it enters the shortlist, but the silhouette cost
+    ranks it last (a forward arm a few cm off costs more than a missing one: 19.3 against
+    10.7-15.5 on that frame), so no start changed, and the batch tests' small-budget fits got
+    other (worse) starts: left off.
     """
     from calibration.rotation import matrix_to_rotvec, rotvec_to_matrix
 
@@ -304,7 +314,13 @@ def library_match(model, cameras, masks, xy, *, shape=None, scales=SCALES, n_hea
     xys = np.atleast_2d(np.asarray(xy, dtype=np.float64))
     scores = np.stack([library_scores(pts, cameras, masks, yaws, q, factor=factor, shadows=shadows)
                        for q in xys])  # (floor points, P*S, H)
-    order = np.argsort(scores, axis=None)[:shortlist]
+    flat = scores.ravel()
+    order = np.argsort(flat, kind="stable")
+    if per_family is None:
+        order = order[:shortlist]
+    else:
+        fam_of = np.asarray(names)[np.unravel_index(order, scores.shape)[1] // len(scales)]
+        order = order[_diverse(fam_of, flat[order], shortlist, per_family)]
     x_idx, ps_idx, h_idx = np.unravel_index(order, scores.shape)
     p_idx, s_idx = np.divmod(ps_idx, len(scales))
     out = []
@@ -317,6 +333,21 @@ def library_match(model, cameras, masks, xy, *, shape=None, scales=SCALES, n_hea
     return {"poses": np.asarray(out), "families": [names[p] for p in p_idx], "scales": scales[s_idx].tolist(),
             "scores": scores[x_idx, ps_idx, h_idx].tolist(), "stature": float(scales[s_idx[0]] * stature),
             "xy": xys[x_idx[0]].copy()}
+
+
+def _diverse(families, scores, shortlist: int, per_family: int) -> np.ndarray:
+    """Indices into candidates sorted best first (``families``, ``scores``): the first
+    ``shortlist`` with at most ``per_family`` of a family, a candidate scoring exactly as the
+    last kept one of its family (a symmetric posture's mirror image) skipped."""
+    kept, count, last = [], {}, {}
+    for i, (f, s) in enumerate(zip(families, scores)):
+        if count.get(f, 0) >= per_family or last.get(f) == s:
+            continue
+        kept.append(i)
+        count[f], last[f] = count.get(f, 0) + 1, s
+        if len(kept) == shortlist:
+            break
+    return np.asarray(kept, dtype=np.int64)
 
 
 def stand_on_floor(model, shape, poses: np.ndarray) -> np.ndarray:

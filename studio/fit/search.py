@@ -9,7 +9,7 @@ import numpy as np
 from studio.body.skeleton import JOINT_KIND, POSE_SIZE, pose_slices
 from studio.optimize import annealed_particle_filter
 
-__all__ = ["_heading", "_part_groups", "_partitioned_search", "_partitions", "_pose_sigma"]
+__all__ = ["_arm_states", "_heading", "_part_groups", "_partitioned_search", "_partitions", "_pose_sigma"]
 
 
 def _part_groups() -> list[list[int]]:
@@ -37,13 +37,17 @@ def _partitions() -> list[list[int]]:
     return [list(range(3)) + idx(0, 1, 2), idx(3, 4, 5), idx(6, 7, 8), idx(9, 10, 11), idx(12, 13, 14)]
 
 
-def _partitioned_search(cost, x, sigma, lo, hi, groups, *, n_particles, n_layers, rng) -> tuple[np.ndarray, float]:
+def _partitioned_search(cost, x, sigma, lo, hi, groups, *, n_particles, n_layers, rng,
+                        extra=None) -> tuple[np.ndarray, float]:
     """Deutscher's partitioned annealed particle filter: re-search each index group of ``x``
     in turn with the others held; a group's answer is kept only if it lowers ``cost``
-    ((N, D) → (N,)). Returns the parameters and their cost."""
+    ((N, D) → (N,)). ``extra``: group number → (K, len(group)) other states of that group, searched
+    from (the mixture of eq. 4.12 over them) after the search around ``x``'s own values, the
+    lower cost kept: a small particle budget still refines ``x`` as before. Returns the
+    parameters and their cost."""
     x = np.asarray(x, dtype=np.float64).copy()
     current = float(cost(x[None])[0])
-    for idx in groups:
+    for g, idx in enumerate(groups):
         idx = np.asarray(idx)
 
         def sub(Z, idx=idx, base=x.copy()):
@@ -55,7 +59,29 @@ def _partitioned_search(cost, x, sigma, lo, hi, groups, *, n_particles, n_layers
                                      n_layers=n_layers, vectorized=True, seed=rng)
         if r.cost < current:
             x[idx], current = r.x, float(r.cost)
+        if extra and g in extra:
+            r = annealed_particle_filter(sub, extra[g], sigma[idx], bounds=(lo[idx], hi[idx]),
+                                         n_particles=n_particles, n_layers=n_layers, vectorized=True, seed=rng)
+            if r.cost < current:
+                x[idx], current = r.x, float(r.cost)
     return x, current
+
+
+def _arm_states(model, groups) -> dict[int, np.ndarray]:
+    """Group number → the distinct states (K, len(group)) of the arm groups among ``groups``
+    in the posture library's families and their mirror images (:data:`studio.fit.library.FAMILIES`):
+    starts of the per-limb search, so an arm the whole-body search left hanging can be lifted
+    forward or crossed (the library's arm configurations, not just jitter around the answer)."""
+    from studio.fit.library import FAMILIES, _mirror, family_pose
+
+    sl = pose_slices()
+    arms = {tuple(range(sl[a].start, sl[c].stop)) for a, c in ((3, 5), (6, 8))}
+    poses = [q for f in FAMILIES for q in (family_pose(model, f), _mirror(family_pose(model, f)))]
+    out = {}
+    for g, idx in enumerate(groups):
+        if tuple(idx) in arms:
+            out[g] = np.unique(np.round(np.stack([q[idx] for q in poses]), 6), axis=0)
+    return out
 
 
 def _heading(pose: np.ndarray) -> float:

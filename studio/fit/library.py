@@ -266,7 +266,7 @@ def _library_bodies(model, shape, library, n_points: int):
 
 
 def library_match(model, cameras, masks, xy, *, shape=None, scales=SCALES, n_headings: int = 12,
-                  shortlist: int = 12, n_points: int = 1200, factor: int = 8, per_family: int | None = None,
+                  shortlist: int = 12, n_points: int = 1200, factor: int = 8,
                   library: tuple[np.ndarray, list[str]] | None = None, shadows: dict | None = None) -> dict:
     """The library postures best matching the silhouettes (:func:`library_scores`), searched
     over posture × stature scale × heading with the bodies of ``shape`` (default: the mean).
@@ -286,15 +286,13 @@ def library_match(model, cameras, masks, xy, *, shape=None, scales=SCALES, n_hea
     ``factor`` 6 or 12: worse or no better). ``shadows``: the shadow camera's views
     (:func:`library_scores`), for a frame fitted with its shadow.
 
-    ``per_family``: at most this many candidates of one family in the shortlist, and a
-    symmetric posture's mirror image (the same body, the same score) only once
-    (:func:`_diverse`; None, the default: the plain best ``shortlist``). A forward arm is a few
-    per cent of the points: on a dev ``arm_forward`` frame its family ranked 21st of the
-    candidates, 5th of the families, behind pairs of identical arms-crossed / arms-down bodies
-    that filled the 12; with ``per_family=3`` it enters the shortlist, but the silhouette cost
-    ranks it last (a forward arm a few cm off costs more than a missing one: 19.3 against
-    10.7-15.5 on that frame), so no start changed, and the batch tests' small-budget fits got
-    other (worse) starts: left off.
+    The shortlist is the plain best ``shortlist``: a symmetric posture and its mirror image are
+    the same body with the same score, so pairs fill it (on a dev ``arm_forward`` frame that
+    family ranked 21st of the candidates, 5th of the families). A shortlist of at most 3 per
+    family without the twins brought it in, but the silhouette cost ranked it last (19.3 against
+    10.7-15.5: a forward arm a few cm off costs more than a missing one), no start changed, and
+    the batch tests' small-budget fits got worse starts; the per-limb search's arm states
+    (:func:`studio.fit.search._arm_states`) lift such an arm instead.
     """
     from calibration.rotation import matrix_to_rotvec, rotvec_to_matrix
 
@@ -314,13 +312,7 @@ def library_match(model, cameras, masks, xy, *, shape=None, scales=SCALES, n_hea
     xys = np.atleast_2d(np.asarray(xy, dtype=np.float64))
     scores = np.stack([library_scores(pts, cameras, masks, yaws, q, factor=factor, shadows=shadows)
                        for q in xys])  # (floor points, P*S, H)
-    flat = scores.ravel()
-    order = np.argsort(flat, kind="stable")
-    if per_family is None:
-        order = order[:shortlist]
-    else:
-        fam_of = np.asarray(names)[np.unravel_index(order, scores.shape)[1] // len(scales)]
-        order = order[_diverse(fam_of, flat[order], shortlist, per_family)]
+    order = np.argsort(scores, axis=None, kind="stable")[:shortlist]
     x_idx, ps_idx, h_idx = np.unravel_index(order, scores.shape)
     p_idx, s_idx = np.divmod(ps_idx, len(scales))
     out = []
@@ -333,21 +325,6 @@ def library_match(model, cameras, masks, xy, *, shape=None, scales=SCALES, n_hea
     return {"poses": np.asarray(out), "families": [names[p] for p in p_idx], "scales": scales[s_idx].tolist(),
             "scores": scores[x_idx, ps_idx, h_idx].tolist(), "stature": float(scales[s_idx[0]] * stature),
             "xy": xys[x_idx[0]].copy()}
-
-
-def _diverse(families, scores, shortlist: int, per_family: int) -> np.ndarray:
-    """Indices into candidates sorted best first (``families``, ``scores``): the first
-    ``shortlist`` with at most ``per_family`` of a family, a candidate scoring exactly as the
-    last kept one of its family (a symmetric posture's mirror image) skipped."""
-    kept, count, last = [], {}, {}
-    for i, (f, s) in enumerate(zip(families, scores)):
-        if count.get(f, 0) >= per_family or last.get(f) == s:
-            continue
-        kept.append(i)
-        count[f], last[f] = count.get(f, 0) + 1, s
-        if len(kept) == shortlist:
-            break
-    return np.asarray(kept, dtype=np.int64)
 
 
 def stand_on_floor(model, shape, poses: np.ndarray) -> np.ndarray:

@@ -55,13 +55,9 @@ def _partitioned_search(cost, x, sigma, lo, hi, groups, *, n_particles, n_layers
             X[:, idx] = Z
             return cost(X)
 
-        r = annealed_particle_filter(sub, x[idx], sigma[idx], bounds=(lo[idx], hi[idx]), n_particles=n_particles,
-                                     n_layers=n_layers, vectorized=True, seed=rng)
-        if r.cost < current:
-            x[idx], current = r.x, float(r.cost)
-        if extra and g in extra:
-            r = annealed_particle_filter(sub, extra[g], sigma[idx], bounds=(lo[idx], hi[idx]),
-                                         n_particles=n_particles, n_layers=n_layers, vectorized=True, seed=rng)
+        for start in (x[idx], *((extra[g],) if extra and g in extra else ())):
+            r = annealed_particle_filter(sub, start, sigma[idx], bounds=(lo[idx], hi[idx]), n_particles=n_particles,
+                                         n_layers=n_layers, vectorized=True, seed=rng)
             if r.cost < current:
                 x[idx], current = r.x, float(r.cost)
     return x, current

@@ -180,15 +180,16 @@ def person_albedo(labels: np.ndarray, person: dict, rng: np.random.Generator) ->
     return srgb_to_linear(np.clip(srgb, 0, 255)), float(tone)
 
 
-def dress(V: np.ndarray, F: np.ndarray, labels: np.ndarray, looseness) -> np.ndarray:
+def dress(V: np.ndarray, F: np.ndarray, labels: np.ndarray, looseness, normals=None) -> np.ndarray:
     """Loose garments: move clothed vertices out along their normals by ``looseness`` metres
-    (one value for every clothed vertex, or per vertex (V,) as :func:`garment_offsets` gives)."""
+    (one value for every clothed vertex, or per vertex (V,) as :func:`garment_offsets` gives);
+    ``normals``: the posed vertex normals when the caller has them already."""
     amount = np.asarray(looseness, dtype=np.float64)
     if amount.ndim == 0:
         amount = np.where(np.isin(labels, [LABEL_TOP, LABEL_BOTTOM]), float(amount), 0.0)
     if not np.any(amount > 0):
         return V
-    N = vertex_normals(V, F)
+    N = vertex_normals(V, F) if normals is None else normals
     return (V + N * amount[:, None]).astype(V.dtype)
 
 
@@ -334,10 +335,11 @@ class Scene:
         person = self.spec["person"]
         offsets = garment_offsets(self.labels, self.body.rest_height, person, LABEL_TOP, LABEL_BOTTOM)
         V = self.body.vertices[frame].astype(np.float64)
-        if np.any(offsets > 0):
-            offsets = offsets * drape(vertex_normals(V, self.body.faces), self.body.faces, self.labels,
-                                      self.body.rest_height, LABEL_TOP, LABEL_BOTTOM)
-        return dress(V, self.body.faces, self.labels, offsets)
+        if not np.any(offsets > 0):
+            return V
+        normals = vertex_normals(V, self.body.faces)
+        offsets = offsets * drape(normals, self.body.faces, self.labels, self.body.rest_height, LABEL_TOP, LABEL_BOTTOM)
+        return dress(V, self.body.faces, self.labels, offsets, normals=normals)
 
     def skirt(self, frame: int) -> tuple[np.ndarray, np.ndarray] | None:
         """(vertices, faces) of the skirt of body frame ``frame``, or None (no skirt)."""

@@ -9,9 +9,10 @@ Parts, one run, side by side:
    has truth labels, else the box scene of :mod:`studio.segment.synthetic` (said so).
 2. **CDnet 2014 highway** (real, single view; ``segmentation_cdnet.py``): the adaptive model
    (:meth:`BackgroundModel.apply`) and the fixed eq. 5.5 model beside OpenCV GSOC, MOG2, KNN,
-   CNT, all run over the same frames in this run; settings tuned on GT frames 470–699, scores on
-   700–1200: CDnet recall / precision / F, FPR-S (shadow pixels labelled foreground), shadow
-   precision / recall, frames/s. Targets: F above GSOC's, FPR-S ≤ 0.30.
+   CNT, all run over the same frames in this run; settings tuned on GT frames 470–699 (fixed
+   split) and by blocked cross-validation over 700–1200, scores on 700–1200: CDnet recall /
+   precision / F, FPR-S (shadow pixels labelled foreground), shadow precision / recall, frames/s.
+   Targets: F above GSOC's, FPR-S ≤ 0.30.
 3. **Skin** (real SFA faces + abdomen masks, threshold 128): train on even-indexed images of
    each set, test on the odd ones; HS-histogram classifier (posterior ranking and the literal
    eq. 6.10 density rule) vs a fixed YCrCb box (Cr 133–173, Cb 77–127).

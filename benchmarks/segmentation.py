@@ -25,7 +25,8 @@ Parts, one run, side by side:
    and mask quality on the person frames, the chair case as a picture.
 
 Run: ``.venv/bin/python benchmarks/segmentation.py [--session DIR] [--quick] [--skip PART]``.
-Writes ``benchmarks/results/segmentation.json``.
+Writes ``benchmarks/results/segmentation.json`` (a part skipped with ``--skip`` keeps the figures
+of the last run that measured it).
 """
 
 from __future__ import annotations
@@ -326,7 +327,9 @@ def main(argv=None) -> int:
     ap.add_argument("--workers", type=int, default=2)
     ap.add_argument("--skip", action="append", default=[], choices=["sim", "cdnet", "skin", "speed", "throughput", "uu"])
     args = ap.parse_args(argv)
-    results = {"date": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime())}
+    # parts skipped in this run keep the figures of the last run that measured them
+    results = json.loads(RESULTS.read_text()) if args.skip and RESULTS.exists() else {}
+    results["date"] = time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime())
     if "sim" not in args.skip:
         session = args.session or find_sim_session(args.search or [REPO / "studio" / "samples"])
         results["simulated"] = bench_simulated(session, args.quick)

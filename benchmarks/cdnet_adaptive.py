@@ -23,6 +23,7 @@ import numpy as np
 
 from studio.segment import PERSON, AdaptiveSettings, clean_labels, learn_shadow_direction, learn_tint, shadow_geometry
 from studio.segment.adaptive import adaptive_step
+from studio.segment.self_shadow import StreamFrame, learn_stream_shadows, stream_frame
 from studio.segment.tuning import cdnet_counts, pick_operating_point, scores_from_counts
 
 # grids, fixed before any evaluation figure of this protocol was computed
@@ -42,24 +43,30 @@ class DetectionRun:
     """One pass of the adaptive model (``start`` on frame 1, then every frame 1..last, as the
     benchmark's ``apply`` runs) with detection settings ``det``; keeps, for each frame in ``keep``,
     the pixels over the distance or in ``extra[i]`` (CDnet's shadow truth, for :func:`learn_tint`)
-    with their frame values and the running mean / deviation before the step."""
+    with their frame values and the running mean / deviation before the step; and for each frame in
+    ``stream`` its foreground pixels (:func:`studio.segment.stream_frame`, no truth: the label-free
+    tint and direction of :func:`studio.segment.learn_stream_shadows`)."""
 
-    def __init__(self, frames, det: AdaptiveSettings, keep, extra: dict | None = None, store: bool = True):
+    def __init__(self, frames, det: AdaptiveSettings, keep, extra: dict | None = None, store: bool = True,
+                 stream=()):  # fmt: skip
         self.det, self.shape = det, frames[0].shape[:2]
         self.raw: dict[int, np.ndarray] = {}  # frame -> (H, W) bool, over the distance
         self.pixels: dict[int, tuple] = {}  # frame -> (flat index, frame values, mean, dev)
-        keep = set(keep)
+        self.stream: dict[int, StreamFrame] = {}
+        keep, stream = set(keep), set(stream)
         mean = frames[0].astype(np.float32)  # BackgroundModel.start: the first frame, seen once
         dev = np.zeros_like(mean)
-        for i in range(1, max(keep) + 1):
+        for i in range(1, max(keep | stream) + 1):
             frame = frames[i - 1]
-            snap = (mean.copy(), dev.copy()) if store and i in keep else None
+            snap = (mean.copy(), dev.copy()) if (store and i in keep) or i in stream else None
             labels, _ = adaptive_step(frame, mean, dev, det, i)
+            if i in stream:
+                self.stream[i] = stream_frame(frame, snap[0], labels > 0)
             if i not in keep:
                 continue
             over = labels > 0
             self.raw[i] = over
-            if snap is not None:
+            if store:
                 sel = over | extra[i] if extra is not None and i in extra else over
                 idx = np.flatnonzero(sel)
                 self.pixels[i] = (idx, frame.reshape(-1, 3)[idx][None], snap[0].reshape(-1, 3)[idx][None],
@@ -102,11 +109,21 @@ def detection_grid(frames, gt_frames: list[int], truths: dict, roi) -> dict:
     return table
 
 
-def gate_grid(run: DetectionRun, gt_frames: list[int], tune: list[int], truths: dict, roi, shadow_masks: dict):
-    """Tint and direction learned on ``tune``; then every colour gate, alone and with each
-    geometry fraction, scored on every ground-truth frame. Returns ``(tint, direction, {settings: (N, 8)})``."""
+def labelled_shadows(run: DetectionRun, tune: list[int], truths: dict, shadow_masks: dict):
+    """Tint and direction from the truth of ``tune``'s frames (:func:`learn_tint`, :func:`learn_shadow_direction`)."""
     tint = run.tint(tune, shadow_masks)
-    direction = learn_shadow_direction([truths[i] == 255 for i in tune], [shadow_masks[i] for i in tune])
+    return tint, learn_shadow_direction([truths[i] == 255 for i in tune], [shadow_masks[i] for i in tune])
+
+
+def label_free_shadows(run: DetectionRun, frames_: list[int]):
+    """Tint and direction from the model's own foreground over ``frames_`` (no truth;
+    :func:`learn_stream_shadows` with its defaults). Returns the :class:`StreamShadows`."""
+    return learn_stream_shadows([run.stream[i] for i in frames_])
+
+
+def gate_grid(run: DetectionRun, gt_frames: list[int], truths: dict, roi, tint, direction) -> dict:
+    """Every colour gate with ``tint``, alone and with each geometry fraction along ``direction``,
+    scored on every ground-truth frame: ``{settings: (N, 8)}``."""
     base = run.det.to_dict()
     settings = []
     for vr, chroma in itertools.product(VALUE_RATIOS, CHROMAS):
@@ -122,7 +139,7 @@ def gate_grid(run: DetectionRun, gt_frames: list[int], tune: list[int], truths: 
             for s in shaped:
                 rows[s].append(cdnet_counts(shadow_geometry(lab, direction, s.shadow_fraction), truths[i], roi))
         table.update({s: np.stack(r) for s, r in rows.items()})
-    return tint, direction, table
+    return table
 
 
 def tuning_points(table: dict, rows: np.ndarray) -> list[tuple[object, float, float]]:

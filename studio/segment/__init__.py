@@ -11,6 +11,7 @@ from studio.segment.errors import SegmentationError
 from studio.segment.hsv import circular_mean, circular_std, hue_distance, rgb_to_hsv
 from studio.segment.metrics import binary_scores, tune_thresholds
 from studio.segment.morphology import Morphology, clean_labels, fill_holes, remove_small_components
+from studio.segment.self_shadow import StreamFrame, StreamShadows, learn_stream_shadows, stream_frame
 from studio.segment.session import SegmentOptions, SegmentationSummary, segment_session
 from studio.segment.shadow_geometry import learn_shadow_direction, shadow_geometry
 from studio.segment.skin import SkinClassifier, ycrcb_skin
@@ -32,6 +33,8 @@ __all__ = [
     "SkinClassifier",
     "StaticDetector",
     "StaticSettings",
+    "StreamFrame",
+    "StreamShadows",
     "Thresholds",
     "VotingResult",
     "binary_scores",
@@ -45,11 +48,13 @@ __all__ = [
     "hue_distance",
     "ignore_masks",
     "learn_shadow_direction",
+    "learn_stream_shadows",
     "learn_tint",
     "remove_small_components",
     "rgb_to_hsv",
     "segment_session",
     "shadow_geometry",
+    "stream_frame",
     "tune_thresholds",
     "vote_shadows",
     "ycrcb_skin",

@@ -100,7 +100,9 @@ def _mirror(pose: np.ndarray) -> np.ndarray:
 def pose_library(model, *, variants: int = 6, jitter: float = 0.15, seed: int = 0) -> tuple[np.ndarray, list[str]]:
     """Library poses (N, POSE_SIZE) and their family names (N,): every family, its mirror
     image, and ``variants`` - 1 jittered copies of each (Gaussian ``jitter`` rad on every joint
-    angle), clipped to the joint limits. Deterministic for ``seed``."""
+    angle), clipped to the joint limits. Deterministic for ``seed``. A symmetric posture (an
+    unjittered A-pose, squat, …) equals its mirror image and is kept once: its twin was the same
+    body with the same score and filled a second place of the shortlist."""
     rng = np.random.default_rng(seed)
     poses, names = [], []
     joints = np.arange(6, POSE_SIZE)
@@ -110,8 +112,12 @@ def pose_library(model, *, variants: int = 6, jitter: float = 0.15, seed: int = 
             p = base.copy()
             if k:
                 p[joints] += rng.normal(0.0, jitter, len(joints))
-            for q in (p, _mirror(p)):
-                poses.append(model.clip_pose(q))
+            q = model.clip_pose(p)
+            poses.append(q)
+            names.append(family)
+            m = model.clip_pose(_mirror(p))
+            if not np.allclose(m, q, atol=1e-12):  # a symmetric posture is its own mirror image: once
+                poses.append(m)
                 names.append(family)
     return np.asarray(poses), names
 

@@ -53,7 +53,7 @@ from studio.body import BodyModel
 from studio.body.skeleton import POSE_SIZE
 from studio.cost import SilhouetteTarget
 from studio.fit.errors import FitError, UnusableFrame
-from studio.fit.init import STATURE_STEPS, hull_centroid, hull_height, initial_poses, stature_search, stature_shape
+from studio.fit.init import hull_centroid, hull_height, initial_poses, stature_search, stature_shape
 from studio.fit.library import library_match, stand_on_floor
 from studio.fit.objective import CylinderObjective, FrameObjective, pose_bounds
 from studio.fit.options import FitOptions
@@ -287,13 +287,13 @@ def fit_frame(
                 targets = build_targets(masks, [c.name for c in cameras], options, ignore=early.ignore)
                 n_early += pose_obj.n_evaluations + (apf_obj.n_evaluations if apf_obj is not pose_obj else 0)
                 pose_obj, apf_obj = objectives(targets)
-        if match is not None and init_height is not None and len(cameras) > 1:
+        if match is not None and init_height is not None and len(cameras) > 1 and options.stature_steps:
             # the library's stature refined with its best start (a stool left out as above)
             init_height, base_shape = stature_search(
                 model, lambda s: FrameObjective(model, cameras, targets, s, 0, options.prior_weight, shadow=shadow),
-                starts[int(hint_pose is not None)], init_height, search)
+                starts[int(hint_pose is not None)], init_height, search, options.stature_steps)
             starts = stand_on_floor(model, base_shape, starts)
-            n_early += (len(STATURE_STEPS) + pose_obj.n_evaluations
+            n_early += (len(options.stature_steps) + pose_obj.n_evaluations
                         + (apf_obj.n_evaluations if apf_obj is not pose_obj else 0))
             pose_obj, apf_obj = objectives(targets)
         sigma = _pose_sigma(1.0)

@@ -101,8 +101,11 @@ def pose_library(model, *, variants: int = 6, jitter: float = 0.15, seed: int = 
     """Library poses (N, POSE_SIZE) and their family names (N,): every family, its mirror
     image, and ``variants`` - 1 jittered copies of each (Gaussian ``jitter`` rad on every joint
     angle), clipped to the joint limits. Deterministic for ``seed``. A symmetric posture (an
-    unjittered A-pose, squat, …) equals its mirror image and is kept once: its twin was the same
-    body with the same score and filled a second place of the shortlist."""
+    unjittered A-pose, squat, …) equals its mirror image: its twin is the same body with the same
+    score and fills a second place of the shortlist. Kept: without the twins (dev people, 32
+    frames) the shortlist held 6.6 distinct (family, stature) candidates instead of 4.9, the true
+    family was first as often (24) and among the descriptor's first 4 once more (28 against 27),
+    but the fits changed chaotically (a dev T-pose 8.2 → 21.4 mm, cost 0.63 → 3.15)."""
     rng = np.random.default_rng(seed)
     poses, names = [], []
     joints = np.arange(6, POSE_SIZE)
@@ -112,12 +115,8 @@ def pose_library(model, *, variants: int = 6, jitter: float = 0.15, seed: int = 
             p = base.copy()
             if k:
                 p[joints] += rng.normal(0.0, jitter, len(joints))
-            q = model.clip_pose(p)
-            poses.append(q)
-            names.append(family)
-            m = model.clip_pose(_mirror(p))
-            if not np.allclose(m, q, atol=1e-12):  # a symmetric posture is its own mirror image: once
-                poses.append(m)
+            for q in (p, _mirror(p)):
+                poses.append(model.clip_pose(q))
                 names.append(family)
     return np.asarray(poses), names
 

@@ -21,11 +21,7 @@ def test_library_is_deterministic_within_limits_and_mirrored(model):
     poses, names = pose_library(model)
     again, _ = pose_library(model)
     np.testing.assert_array_equal(poses, again)
-    # every posture and its mirror image, a symmetric family's unjittered posture once (its own twin)
-    symmetric = [f for f in FAMILIES if np.allclose(_mirror(family_pose(model, f)), family_pose(model, f))]
-    assert {"a_pose", "t_pose", "half_squat", "seated"} <= set(symmetric) and "arm_forward" not in symmetric
-    assert set(names) == set(FAMILIES) and len(poses) == 2 * 6 * len(FAMILIES) - len(symmetric)
-    assert len(np.unique(np.round(poses, 9), axis=0)) == len(poses)
+    assert set(names) == set(FAMILIES) and len(poses) == 2 * 6 * len(FAMILIES)
     lo, hi = model.pose_limits[:, 0], model.pose_limits[:, 1]
     assert np.all(poses >= lo - 1e-12) and np.all(poses <= hi + 1e-12)
     p = family_pose(model, "arm_forward")

@@ -53,7 +53,9 @@ class FitOptions:
     cost is lower at the model's ceiling (``benchmarks/pose_ceiling.py``: our model fitted to the true
     body in 3-D) than at the fit on 31 of 32 dev frames, so the fit stops short; 400 distal + 600
     more final evaluations from the benchmark's dev fits lowered the cost of every one of them
-    (median surface 9.0 → 8.6 mm, precision / recall +0.005, ~3 s CPU).
+    (median surface 9.0 → 8.6 mm, precision / recall +0.005, ~3 s CPU). With it (0.45: 405
+    evaluations): walk frame 12 cost 0.441 → 0.346, surface 8.1 → 7.1 mm, +1.0 s CPU; held out
+    (120 frames, once) median surface 10.0 → 9.6 mm, 80 frames closer, 100 at a lower cost.
     ``stature_steps``: relative stature changes searched around the library's stature with its
     best start (:func:`studio.fit.init.stature_search`, e.g. its ``STATURE_STEPS``); off by
     default. On the dev people (28 frames, with the distal stage and the library without mirror

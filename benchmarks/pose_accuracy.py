@@ -16,7 +16,11 @@ side): ``full`` (library start), ``no-library`` (the stride start of the first w
 ``no-support`` (a seated person's stool fitted as body), ``retry`` (a frame the agreement
 gates flag is searched again, ``FitOptions.retries``), ``arm-states`` (the ``full`` options fitted by
 the code whose per-limb search also starts each arm from the library's arm states, issue 13: its own
-folder, so the ``full`` figures of the older code stay as measured). ``--families`` fits only the frames
+folder, so the ``full`` figures of the older code stay as measured), ``distal-nm`` (the same
+options, fitted by the code that refines the distal joints at full resolution before the final
+stage, ``FitOptions.distal_share``: the model-ceiling study, ``benchmarks/pose_ceiling.py``);
+dev experiments of that study: ``distal`` (with a library without mirror twins) and
+``stature-distal`` (that, and the library's stature searched finely, ``FitOptions.stature_steps``). ``--families`` fits only the frames
 of the named posture families (e.g. ``--families seated`` for ``no-support``).
 
 Splits (``--split``): ``held-out`` (the default, seeds from 1000, only ever measured: the figures
@@ -50,7 +54,9 @@ FIRST_SEED = 1000  # held-out people: seeds from here up are only ever measured
 SPLITS = {"held-out": FIRST_SEED, "dev": 100}  # first seed of each split's people
 VARIANTS = {"full": {}, "no-library": {"start": "stride"}, "no-rival": {"rival_heading": False},
             "no-limb": {"limb_particles": 0}, "no-support": {"find_support": False},
-            "retry": {"retries": 1}, "arm-states": {}}
+            "retry": {"retries": 1}, "arm-states": {}, "distal-nm": {},
+            "stature-distal": {"stature_steps": (-0.06, -0.045, -0.03, -0.015, 0.0, 0.015, 0.03, 0.045, 0.06)},
+            "distal": {}}
 STANDING = ("a_pose", "t_pose", "arms_overhead", "hands_on_hips", "arm_forward", "arms_crossed", "wide_stance",
             "torso_twist")
 

@@ -33,7 +33,8 @@
 4. Staged Nelder–Mead (§4.7.4, :func:`studio.optimize.thesis_stages`) refines root + shape,
    the limbs outward, then everything, at the middle level; each limb is then re-searched by a
    small partitioned particle filter (a forearm bent the wrong way is a minimum Nelder–Mead
-   cannot leave); a last root + shape + trunk stage runs at full resolution. Joint limits
+   cannot leave); at full resolution the distal joints (forearms, shins, hands, feet, head),
+   then root + shape + trunk are refined last. Joint limits
    are optimiser bounds, so they always hold.
 5. The quality gates (:func:`studio.fit.quality.fit_quality`) judge the result: ``quality``
    in the result, status ``ok`` / ``suspect`` / ``failed`` with the reasons.
@@ -52,8 +53,7 @@ from studio.body import BodyModel
 from studio.body.skeleton import POSE_SIZE
 from studio.cost import SilhouetteTarget
 from studio.fit.errors import FitError, UnusableFrame
-from studio.body.inverse import shape_from_measurements
-from studio.fit.init import hull_centroid, hull_height, initial_poses
+from studio.fit.init import hull_centroid, hull_height, initial_poses, stature_search, stature_shape
 from studio.fit.library import library_match, stand_on_floor
 from studio.fit.objective import CylinderObjective, FrameObjective, pose_bounds
 from studio.fit.options import FitOptions
@@ -235,10 +235,8 @@ def fit_frame(
     elif options.fit_shape and model.measurement_samples is not None:
         # stature → conditional-mean shape (§4.7.2-style init): from the library's best match,
         # else from the top of the visual hull (wrong for a seated or arms-overhead person)
-        height = match["stature"] if match is not None else hull_height(cameras, masks, xy)
-        base_shape = shape_from_measurements(model, {"stature": height}, refine=0)
-        base_shape = np.clip(base_shape, -2.5 * np.sqrt(model.eigenvalues), 2.5 * np.sqrt(model.eigenvalues))
-        init_height = height
+        init_height = match["stature"] if match is not None else hull_height(cameras, masks, xy)
+        base_shape = stature_shape(model, init_height)
     else:
         base_shape = model.mean_shape()
     search, refine, final = options.levels
@@ -289,6 +287,15 @@ def fit_frame(
                 targets = build_targets(masks, [c.name for c in cameras], options, ignore=early.ignore)
                 n_early += pose_obj.n_evaluations + (apf_obj.n_evaluations if apf_obj is not pose_obj else 0)
                 pose_obj, apf_obj = objectives(targets)
+        if match is not None and init_height is not None and len(cameras) > 1 and options.stature_steps:
+            # the library's stature refined with its best start (a stool left out as above)
+            init_height, base_shape = stature_search(
+                model, lambda s: FrameObjective(model, cameras, targets, s, 0, options.prior_weight, shadow=shadow),
+                starts[int(hint_pose is not None)], init_height, search, options.stature_steps)
+            starts = stand_on_floor(model, base_shape, starts)
+            n_early += (len(options.stature_steps) + pose_obj.n_evaluations
+                        + (apf_obj.n_evaluations if apf_obj is not pose_obj else 0))
+            pose_obj, apf_obj = objectives(targets)
         sigma = _pose_sigma(1.0)
         n_p, n_l = options.n_particles, options.n_layers
         if len(cameras) == 1:  # one view leaves depth, heading and which leg is which open: search wider
@@ -378,6 +385,10 @@ def fit_frame(
     t = time.perf_counter()
     last = [Stage(tuple(range(6)) + tuple(shape_idx) + tuple(i for g in _part_groups()[:1] for i in g),
                   options.final_evaluations, "final")]
+    n_distal = options.distal_share * options.final_evaluations
+    n_distal *= 1.0 if previous_pose is None else options.tracking_budget
+    if n_distal >= 1:  # forearms, shins, hands, feet and head at full resolution first
+        last.insert(0, Stage(tuple(i for g in _part_groups()[1:] for i in g), int(n_distal), "distal"))
     fin = staged_nelder_mead(obj.scalar(final), x_nm, last, bounds=(blo, bhi), step=step * 0.5, adaptive=True)
     timings["final"] = time.perf_counter() - t
     shapes, poses = obj.split(fin.x[None])

@@ -14,7 +14,12 @@ import numpy as np
 
 from studio.fit.errors import FitError
 
-__all__ = ["feet_on_floor", "hull_centroid", "hull_height", "initial_poses", "standing_pose", "stride_poses"]
+__all__ = ["STATURE_STEPS", "feet_on_floor", "hull_centroid", "hull_height", "initial_poses", "standing_pose",
+           "stature_search", "stature_shape", "stride_poses"]
+
+#: Relative stature changes searched around the library's stature with its best posture
+#: (:func:`stature_search`): the library's scale grid steps 6 %.
+STATURE_STEPS = (-0.06, -0.045, -0.03, -0.015, 0.0, 0.015, 0.03, 0.045, 0.06)
 
 
 def _in_mask(cam, mask: np.ndarray, pts: np.ndarray) -> np.ndarray:
@@ -150,3 +155,35 @@ def hull_height(cameras, masks, xy, *, radius: float = 0.35, step: float = 0.02,
         raise FitError("the visual hull above the body's floor position is empty: cannot estimate the height")
     return float(pts[inside, 2].max())
 
+
+
+def stature_shape(model, stature: float) -> np.ndarray:
+    """Shape (n_shape,) of ``stature`` (m): the conditional mean given the stature
+    (:func:`studio.body.shape_from_measurements`, §4.7.2-style), clipped to ±2.5 σ."""
+    from studio.body.inverse import shape_from_measurements
+
+    sig = np.sqrt(model.eigenvalues)
+    return np.clip(shape_from_measurements(model, {"stature": float(stature)}, refine=0), -2.5 * sig, 2.5 * sig)
+
+
+def stature_search(model, objective_of, pose: np.ndarray, stature: float, level: int,
+                   steps=STATURE_STEPS) -> tuple[float, np.ndarray]:
+    """The stature (m) and its shape (:func:`stature_shape`) that best explain the silhouettes
+    with ``pose`` (stood on the floor for each stature) at pyramid ``level``, searched over
+    ``stature × (1 + steps)``. The library's stature comes in 6 % steps, and a wrong one pulls
+    the posture after it: a seated dev body started 7 cm short sat with its knees too straight
+    and its shape stayed short (−10 cm), while the fit's own cost, with the true posture, is
+    lowest at the true stature (±5 cm: 1.5–2.5× the cost; dev people only).
+    ``objective_of(shape)``: the pose objective (eq. 4.6, no free shape coefficient) of a shape."""
+    from studio.fit.library import stand_on_floor
+
+    best = None
+    for d in steps:
+        h = stature * (1.0 + d)
+        shape = stature_shape(model, h)
+        obj = objective_of(shape)
+        p = stand_on_floor(model, shape, pose[None])[0]
+        c = float(obj(obj.pack(shape, p)[None], level)[0])
+        if best is None or c < best[0]:
+            best = (c, h, shape)
+    return best[1], best[2]

@@ -47,6 +47,21 @@ class FitOptions:
     ``start``: how a frame fitted from its silhouettes starts — ``"library"`` (the lab posture
     library matched to the silhouettes, :mod:`studio.fit.library`) or ``"stride"`` (12 headings
     × standing / stride postures, :func:`studio.fit.init.initial_poses`).
+    ``distal_share``: a full-resolution Nelder–Mead stage of the distal joints (forearms, shins,
+    hands, feet, head) before the final one, of ``distal_share × final_evaluations`` evaluations
+    (tracking: × ``tracking_budget`` too; 0 turns it off). The fit's own
+    cost is lower at the model's ceiling (``benchmarks/pose_ceiling.py``: our model fitted to the true
+    body in 3-D) than at the fit on 31 of 32 dev frames, so the fit stops short; 400 distal + 600
+    more final evaluations from the benchmark's dev fits lowered the cost of every one of them
+    (median surface 9.0 → 8.6 mm, precision / recall +0.005, ~3 s CPU). With it (0.45: 405
+    evaluations): walk frame 12 cost 0.441 → 0.346, surface 8.1 → 7.1 mm, +1.0 s CPU; held out
+    (120 frames, once) median surface 10.0 → 9.6 mm, 80 frames closer, 100 at a lower cost.
+    ``stature_steps``: relative stature changes searched around the library's stature with its
+    best start (:func:`studio.fit.init.stature_search`, e.g. its ``STATURE_STEPS``); off by
+    default. On the dev people (28 frames, with the distal stage and the library without mirror
+    twins) it took the seated stature from −60 to −33 mm (median; a seated frame −99 → −59 mm) but
+    the fits changed chaotically: median surface 9.8 → 9.8 mm, 90th percentile 13.1 → 17.7 mm,
+    `ok` 89 → 82 %, a half squat +52 mm tall (−6 before).
     ``retries``: a frame of several views fitted from its silhouettes whose body explains them
     poorly (the agreement gates) is searched again up to this many times, with other random
     draws and from the library's postures other than those the last attempt started from; the
@@ -70,6 +85,8 @@ class FitOptions:
     n_layers_tracking: int = 5
     nm_evaluations: int = 240
     final_evaluations: int = 900
+    distal_share: float = 0.45
+    stature_steps: tuple[float, ...] = ()
     partition_particles: int = 40
     tracking_budget: float = 0.5
     partition_layers: int = 4

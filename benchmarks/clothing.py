@@ -32,6 +32,8 @@ single-pose on every measurement, gender by batch ≥ 98 %.
     .venv/bin/python benchmarks/clothing.py table
     # everyday subset: 2 subjects (one of each sex) × 4 postures, tight and loose
     ... build --quick ; ... run --quick ; ... table
+    # --clothing auto's coverage threshold: the loose batch body's share of the clothing pixels
+    ... coverage --split dev --subjects 4 --poses 4
 """
 
 from __future__ import annotations
@@ -127,13 +129,15 @@ def build(args) -> int:
 
 def _gender_single(frame, options) -> dict:
     """§6.4.5 on one pose: the frame's fit → neutral body → female / male shape steps, pose fixed."""
-    from studio.body import BodyModel
-    from studio.fit.batch import compare_genders, convert_shape
+    from studio.body import BodyModel, measure
+    from studio.fit.batch import compare_genders, convert_shape, gender_scores
 
     neutral = BodyModel.load("neutral")
     shape = convert_shape(BodyModel.load(frame.gender), frame.shape, neutral)
-    costs = {g: c for g, (_, _, c) in compare_genders([frame], neutral, shape, frame.pose[None], options).items()}
-    return {"gender": min(costs, key=costs.get), "costs": costs}
+    terms = gender_scores(compare_genders([frame], neutral, shape, frame.pose[None], options),
+                          measure(neutral, shape)["stature"], options.gender_shape_free)
+    costs = {g: v["score"] for g, v in terms.items()}
+    return {"gender": min(costs, key=costs.get), "costs": costs, "terms": terms}
 
 
 def run_one(p: dict, condition: str, workers: int) -> dict:
@@ -169,6 +173,7 @@ def run_one(p: dict, condition: str, workers: int) -> dict:
     out = {"subject": p["name"], "condition": condition, "sex": truth["sex"], "garment": p["garment"] if
            condition == "loose" else ["shirt", "trousers"], "poses": p["poses"], "frames": batch["frames"],
            "batch": {"gender": batch["gender"], "gender_costs": batch["gender_costs"],
+                     "gender_terms": batch.get("gender_terms"), "clothing_auto": batch.get("clothing_auto"),
                      "margin": batch["gender_margin"], "errors_mm": {k: 1000 * (bm[k] - true_m[k]) for k in MEASURES},
                      "consistency": batch["consistency"], "timings": batch["timings"]},
            "single": {}, "time_segment_s": t_seg, "time_batch_s": batch["wall_time"],
@@ -190,7 +195,7 @@ def run_one(p: dict, condition: str, workers: int) -> dict:
         out["single"][str(f)] = {"gender_fit": fit.gender, "status": fit.status, "surface_mm": surf_s,
                                  "errors_mm": {k: 1000 * (sm[k] - true_m[k]) for k in MEASURES},
                                  "measures_m": {k: sm[k] for k in MEASURES}, "gender_single": g["gender"],
-                                 "gender_single_costs": g["costs"]}
+                                 "gender_single_costs": g["costs"], "gender_single_terms": g["terms"]}
     out["batch"]["surface_mm"] = float(np.median(surf_b))
     out["batch"]["surface_per_frame_mm"] = surf_b
     # skin: segmentation's self-trained model and the session-adapted one vs the true skin
@@ -231,6 +236,35 @@ def run(args) -> int:
     return table(args)
 
 
+def coverage(args) -> int:
+    """``--clothing auto``'s evidence: every subject × condition fitted ``auto`` (a loose batch,
+    then tight if its body covers at least ``TIGHT_RECALL`` of the clothing pixels); prints the
+    coverage per condition and writes ``coverage.json``. Reuses the sessions of ``run``
+    (single-frame fits cached); overwrites their ``fit/batch.json``."""
+    from rigs.atomic import atomic_write_json
+    from studio.fit.batch_session import TIGHT_RECALL, fit_batch_session
+    from studio.segment import segment_session
+    from studio.simulate import ensure_rendered
+    from studio.workspace import Workspace
+
+    out = {}
+    for p in subjects(args.subjects, args.poses, args.quick):
+        for cond in args.conditions:
+            folder = bench_root() / p["name"] / cond
+            session = ensure_rendered(folder / "spec.yaml", seed=0, cache_dir=folder / "render")
+            segment_session(session, workers=1)
+            obj = fit_batch_session(Workspace.open(session), n_frames=len(p["poses"]), clothing="auto", gender="auto",
+                                    workers=args.workers, chain_length=1)
+            out[f"{p['name']}_{cond}"] = {"condition": cond, **obj["clothing_auto"]}
+            print(f"{p['name']} {cond}: coverage {obj['clothing_auto']['clothing_recall']:.3f} -> "
+                  f"{obj['clothing_auto']['chosen']}", flush=True)
+    for cond in args.conditions:
+        cov = sorted(v["clothing_recall"] for v in out.values() if v["condition"] == cond)
+        print(f"{cond}: coverage {', '.join(f'{c:.3f}' for c in cov)} (threshold {TIGHT_RECALL})")
+    atomic_write_json(bench_root() / "coverage.json", out)
+    return 0
+
+
 def _vote(single: dict) -> str:
     votes = [s["gender_single"] for s in single.values()]
     f, m = votes.count("female"), votes.count("male")
@@ -267,6 +301,11 @@ def summarise(rows: list[dict]) -> dict:
         s["gender_pct"] = {"single": 100 * float(np.mean(single_ok)),
                            "vote": 100 * float(np.mean([_vote(r["single"]) == r["sex"] for r in rs])),
                            "batch": 100 * float(np.mean([r["batch"]["gender"] == r["sex"] for r in rs]))}
+        # the same batches decided by the cost alone (eq. 6.7, the thesis' rule), where recorded
+        terms = [(r["batch"].get("gender_terms"), r["sex"]) for r in rs]
+        if all(t for t, _ in terms):
+            s["gender_pct"]["batch_cost_only"] = 100 * float(np.mean(
+                [min(t, key=lambda g, t=t: t[g]["cost"]) == sex for t, sex in terms]))
         s["flagged"] = sum(bool(r["batch"]["consistency"]["flagged"]) for r in rs)
         s["skin"] = {k: {m: float(np.mean([r["skin"][k][m] for r in rs])) for m in ("precision", "recall")}
                      for k in ("segmentation", "session")}
@@ -297,7 +336,8 @@ def table(args) -> int:
             for k, v in s["constancy"].items()))
         g = s["gender_pct"]
         print(f"gender accuracy single / vote / batch: {g['single']:.0f} / {g['vote']:.0f} / {g['batch']:.0f} % "
-              f"(thesis {THESIS_GENDER['single']} / {THESIS_GENDER['vote']} / {THESIS_GENDER['batch']} %)")
+              f"(thesis {THESIS_GENDER['single']} / {THESIS_GENDER['vote']} / {THESIS_GENDER['batch']} %)"
+              + (f"; batch by the cost alone {g['batch_cost_only']:.0f} %" if "batch_cost_only" in g else ""))
         sk = s["skin"]
         print(f"skin P/R: segmentation (self-trained box) {sk['segmentation']['precision']:.2f}/"
               f"{sk['segmentation']['recall']:.2f}, session-adapted {sk['session']['precision']:.2f}/"
@@ -315,7 +355,7 @@ def table(args) -> int:
 
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("step", choices=["build", "run", "table"])
+    ap.add_argument("step", choices=["build", "run", "table", "coverage"])
     ap.add_argument("--subjects", type=int, default=20)
     ap.add_argument("--poses", type=int, default=11)
     ap.add_argument("--quick", action="store_true", help="2 subjects × 4 postures (overrides --subjects/--poses)")
@@ -331,7 +371,7 @@ def main(argv=None) -> int:
     RUN["first_seed"] = SPLIT_SEEDS[args.split]
     if args.split != "report":
         RUN["name"] = f"{args.split}-{RUN['name']}"
-    return {"build": build, "run": run, "table": table}[args.step](args)
+    return {"build": build, "run": run, "table": table, "coverage": coverage}[args.step](args)
 
 
 if __name__ == "__main__":

@@ -6,7 +6,8 @@ import pytest
 from studio.body import BodyModel, measure
 from studio.body.skeleton import pose_slices
 from studio.fit import FitOptions, fit_frame
-from studio.fit.batch import BatchFrame, BatchOptions, batch_fit, choose_frames, convert_shape
+from studio.fit.batch import (GENDER_PRIOR_WEIGHT, BatchFrame, BatchOptions, batch_fit, choose_frames, convert_shape,
+                               gender_scores, stature_evidence)
 from studio.fit.errors import FitError
 from studio.fit.init import standing_pose
 from studio.render import silhouette
@@ -89,7 +90,56 @@ def test_gender_by_batch_reports_both_costs_and_the_margin(frames):
     assert set(res.gender_costs) == {"female", "male"}
     assert res.gender == min(res.gender_costs, key=res.gender_costs.get)
     assert res.margin == pytest.approx(abs(res.gender_costs["female"] - res.gender_costs["male"]))
-    assert res.gender == "female"
+    assert res.gender == "female" and res.margin > 0
+    terms = res.gender_terms
+    for g in ("female", "male"):
+        assert terms[g]["score"] == pytest.approx(terms[g]["cost"] + GENDER_PRIOR_WEIGHT * terms[g]["stature"])
+        assert terms[g]["score"] == res.gender_costs[g]
+    assert res.to_json()["gender_terms"] == terms
+
+
+class _Model:
+    """Stand-in of a gender model for :func:`gender_scores`: its PCA's variances only."""
+
+    n_shape = 4
+
+    def __init__(self, sigma):
+        self.eigenvalues = np.square(np.asarray(sigma, dtype=np.float64))
+
+
+def test_gender_decision_adds_the_stature_evidence():
+    """A loosely dressed 1.86 m man (costs of dev subject 3002): the cost alone favours the female
+    model by 0.027; among ANSUR II adults 1.86 m is z = 3.61 for a woman, 1.51 for a man, so the
+    score (cost + 0.1 × (z² + 2 ln σ)) calls him male by 1.03. At 1.69 m the evidence is nearly
+    even (0.015 for the female model) and the cost decides."""
+    female, male = _Model([1.0, 2.0, 0.5, 1.0]), _Model([2.0, 1.0, 1.0, 1.0])
+    # (model, re-estimated shape, batch cost, the batch body in that model's coefficients)
+    cands = {"female": (female, np.array([0.5, 0.0, 0.0, 9.0]), 3.236, np.array([2.0, 1.6, 0.0, 9.0])),
+             "male": (male, np.array([3.0, 0.0, 0.0, 9.0]), 3.263, np.array([1.8, 0.0, 0.0, 9.0]))}
+    terms = gender_scores(cands, 1.86, 3, weight=0.1)
+    assert terms["female"]["stature"] == pytest.approx(3.606**2 + 2 * np.log(0.0642), abs=0.02)
+    assert terms["male"]["stature"] == pytest.approx(1.513**2 + 2 * np.log(0.0686), abs=0.02)
+    assert terms["female"]["score"] == pytest.approx(3.236 + 0.1 * terms["female"]["stature"])
+    win = min(terms, key=lambda g: terms[g]["score"])
+    assert win == "male" and terms["female"]["score"] - terms["male"]["score"] == pytest.approx(1.03, abs=0.01)
+    # Mahalanobis distances reported: the batch body female (2/1)² + (1.6/2)² = 4.64, male
+    # (1.8/2)² = 0.81 (the 4th coefficient not counted); the re-estimated shapes 0.25 and 2.25
+    assert terms["female"]["mahalanobis"] == pytest.approx(4.64)
+    assert terms["male"]["mahalanobis"] == pytest.approx(0.81)
+    assert terms["female"]["mahalanobis_fit"] == pytest.approx(0.25)
+    assert terms["male"]["mahalanobis_fit"] == pytest.approx(2.25)
+    # at 1.69 m the stature favours neither much (0.015 for the female model), a cost lead of
+    # 0.027 for the male model decides
+    swapped = {"female": cands["female"][:2] + (3.263,) + cands["female"][3:],
+               "male": cands["male"][:2] + (3.236,) + cands["male"][3:]}
+    even = gender_scores(swapped, 1.69, 3, weight=0.1)
+    assert 0.01 < 0.1 * (even["male"]["stature"] - even["female"]["stature"]) < 0.02
+    assert min(even, key=lambda g: even[g]["score"]) == "male"
+    plain = gender_scores(cands, 1.86, 3, weight=0.0)  # the thesis' rule: the lower cost
+    assert min(plain, key=lambda g: plain[g]["score"]) == "female"
+    assert stature_evidence(1.62, "female") < stature_evidence(1.62, "male")
+    with pytest.raises(FitError, match="gender prior weight: expected a finite number >= 0"):
+        gender_scores(cands, 1.86, 3, weight=-1.0)
 
 
 def test_shapes_convert_between_gender_models():
@@ -134,3 +184,16 @@ def test_loose_batch_takes_frames_failed_only_by_the_clothes(frames):
         choose_frames(fits, 3)
     fits[2] = base[2]  # one good frame: still fewer than two, the clothes-failed ones join it
     assert choose_frames(fits, 3, loose=True) == [0, 1, 2] and choose_frames(fits, 3) == [2]
+
+
+def test_auto_clothing_threshold_separates_tight_from_loose_coverage():
+    """``--clothing auto``: a tightly dressed woman's loose batch covered 89.3 % of her clothing
+    pixels (called loose by the old 92 % threshold); loosely dressed dev people 64–70 %."""
+    from studio.fit.batch_session import TIGHT_RECALL, clothing_from_coverage
+
+    assert 0.70 < TIGHT_RECALL < 0.893
+    assert clothing_from_coverage(0.893) == "tight"
+    assert clothing_from_coverage(0.698) == "loose"
+    assert clothing_from_coverage(0.5, threshold=0.4) == "tight"
+    with pytest.raises(FitError, match=r"clothing coverage: expected a share in \[0, 1\]"):
+        clothing_from_coverage(1.5)

@@ -379,7 +379,7 @@ def segment_session(
     for a camera without background frames, image sizes that disagree with the background
     model or the calibration, and a missing calibration when voting is requested.
     """
-    from rigs.atomic import atomic_write_json
+    from rigs.atomic import atomic_write_json, remove_temporaries
     from rigs.imageio import read_image
     from studio.execution import ExecutionError, open_runner, run_chains
     from studio.workspace import SEGMENTATION_RESERVED, WorkspaceError
@@ -439,14 +439,14 @@ def segment_session(
     }
     # the settings go down first: a rerun after a kill knows which finished frames it may keep
     atomic_write_json(ws.layout.segmentation_summary, summary, fsync=False)
-    for cam in cameras:
-        ws.layout.labels(cam, 0).parent.mkdir(parents=True, exist_ok=True)
-        if cam in state["skin"]:
-            ws.layout.skin(cam, 0).parent.mkdir(parents=True, exist_ok=True)
-        if options.overlay_every > 0:
-            ws.layout.segmentation_overlay(cam, 0).parent.mkdir(parents=True, exist_ok=True)
-    if options.overlay_every > 0 and state["grid"] is not None:
-        ws.layout.floor_votes(0).parent.mkdir(parents=True, exist_ok=True)
+    folders = [ws.layout.labels(cam, 0).parent for cam in cameras]
+    folders += [ws.layout.skin(cam, 0).parent for cam in cameras if cam in state["skin"]]
+    if options.overlay_every > 0:
+        folders += [ws.layout.segmentation_overlay(cam, 0).parent for cam in cameras]
+        folders += [ws.layout.floor_votes(0).parent] if state["grid"] is not None else []
+    for folder in folders:  # the temporary files a killed run's writers left are cleared
+        folder.mkdir(parents=True, exist_ok=True)
+        remove_temporaries(folder)
 
     results = []
     for i in skipped:

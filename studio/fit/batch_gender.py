@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from studio.cost import shape_prior
 from studio.fit.errors import FitError
 
 __all__ = ["GENDER_PRIOR_WEIGHT", "gender_scores", "stature_evidence"]
@@ -24,8 +25,8 @@ GENDER_PRIOR_WEIGHT = 0.1
 def _mahalanobis(model, shape: np.ndarray, k: int) -> float:
     """Σ_{b < k} (β_b / σ_b)² (eq. 6.8 with threshold 0)."""
     k = min(int(k), model.n_shape)
-    z = np.asarray(shape, dtype=np.float64)[:k] / np.sqrt(np.asarray(model.eigenvalues, dtype=np.float64)[:k])
-    return float(np.sum(z**2))
+    sigma = np.sqrt(np.asarray(model.eigenvalues, dtype=np.float64)[:k])
+    return float(shape_prior(np.asarray(shape, dtype=np.float64)[:k], sigma, threshold=0.0))
 
 
 def stature_evidence(stature: float, gender: str) -> float:

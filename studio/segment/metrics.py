@@ -60,24 +60,15 @@ def cdnet_scores(labels: Sequence[np.ndarray], truths: Sequence[np.ndarray], roi
     pixels (50, inside ``roi``) labelled foreground; shadow precision / recall compare
     ``labels == shadow`` with the shadow pixels (None: a method without a shadow label).
     """
-    fg, fg_truth, valid, sh, sh_truth, roi_truths = [], [], [], [], [], []
+    from studio.segment.tuning import COUNT_FIELDS, cdnet_counts, scores_from_counts
+
+    counts = np.zeros(len(COUNT_FIELDS), np.int64)
     for lab, t in zip(labels, truths):
-        lab, t = np.asarray(lab), np.asarray(t)
-        inside = np.ones(t.shape, bool) if roi is None else np.asarray(roi, bool)
-        fg.append(lab == foreground)
-        fg_truth.append(t == 255)
-        valid.append(inside & (t != 85) & (t != 170))
-        sh.append(lab == shadow if shadow is not None else np.zeros(t.shape, bool))
-        sh_truth.append(t == 50)
-        roi_truths.append(inside & (t == 50))
-    s = binary_scores(fg, fg_truth, valid)
-    shadow_pixels = sum(int(m.sum()) for m in roi_truths)
-    shadow_as_fg = sum(int((f & m).sum()) for f, m in zip(fg, roi_truths))
-    shs = binary_scores(sh, sh_truth, valid)
-    return {"recall": s["recall"], "precision": s["precision"], "f_measure": s["f1"],
-            "fpr_shadow": shadow_as_fg / max(shadow_pixels, 1), "shadow_pixels": shadow_pixels,
-            "shadow_precision": shs["precision"] if shadow is not None else None,
-            "shadow_recall": shs["recall"] if shadow is not None else None}  # fmt: skip
+        counts += cdnet_counts(lab, t, roi, foreground, shadow)
+    out = scores_from_counts(counts)
+    if shadow is None:
+        out["shadow_precision"] = out["shadow_recall"] = None
+    return out
 
 
 def _default_objective(pred, truth) -> float:

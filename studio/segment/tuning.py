@@ -6,9 +6,9 @@ of one car are strongly correlated, so a tuning split of a few frames is a small
 random split leaks. The helpers here keep every scored frame away from the frames its settings
 were chosen on:
 
-* :func:`cdnet_counts` — the integer counts behind :func:`studio.segment.metrics.cdnet_scores`
-  for one frame, so a grid can be scored once per frame and summed over any subset of frames
-  (:func:`scores_from_counts` gives the same figures as ``cdnet_scores`` on those frames);
+* :func:`cdnet_counts` — the integer counts of one frame (:func:`studio.segment.metrics.cdnet_scores`
+  sums them and scores them by :func:`scores_from_counts`), so a grid can be scored once per
+  frame and summed over any subset of frames;
 * :func:`blocked_folds` — consecutive frames cut into blocks, blocks alternating between folds;
   :func:`fold_tuning_frames` — the frames a fold's settings may be chosen on (a base split plus
   the other folds, minus a ``gap`` of frames next to any scored frame);

@@ -13,7 +13,10 @@ Layout (DESIGN.md "Capture session", written with :class:`rigs.session.SessionWr
 ``truth/measurements.json`` holds the body file's measurements (Anny's definitions, see
 :mod:`studio.simulate.truth_build`) and, when the body file has the canonical postures
 (``rest_q``, ``tpose_q``), a ``"studio"`` entry {name: value}: the same person measured by
-:func:`studio.body.measure`'s definitions (:func:`studio_truth`).
+:func:`studio.body.measure`'s definitions (:func:`studio_truth`), with ``"studio_code"``: the digest of the code and model file those
+figures come from (:func:`truth_code_digest`). A cached render whose digest differs has them
+recomputed on reuse (:func:`ensure_rendered`), so a change to the measurement definitions
+never meets a stale truth.
 
 The session itself is clean (every frame complete, nominal timestamps); the ``sensor``
 section's ``drop`` and ``jitter_ns`` are echoed in ``session.json`` metadata
@@ -24,6 +27,8 @@ start/end times).
 
 from __future__ import annotations
 
+import hashlib
+import importlib
 import json
 import logging
 import os
@@ -36,12 +41,12 @@ import numpy as np
 
 from rigs.atomic import atomic_write_bytes
 from studio.render import vertex_normals
-from studio.simulate.scene import Scene
+from studio.simulate.scene import Scene, load_body
 from studio.simulate.sensor import apply_sensor
 from studio.simulate.spec import SimSpec, load_spec
 from studio.workspace.layout import Layout
 
-__all__ = ["simulate", "ensure_rendered", "default_cache_dir", "studio_truth", "TRUTH_VERSION"]
+__all__ = ["simulate", "ensure_rendered", "default_cache_dir", "studio_truth", "truth_code_digest", "TRUTH_VERSION"]
 
 log = logging.getLogger(__name__)
 
@@ -153,12 +158,7 @@ def _write_static_truth(scene: Scene, truth: Path, seed: int) -> None:
     lights = [light.to_dict() for light in scene.lights]
     _atomic_json(truth / "lights.json", {"ambient": scene.ambient, "lights": lights,
                                          "ground": {"normal": [0.0, 0.0, 1.0], "offset": 0.0}})
-    meas = json.loads(str(body.extra["measurements"])) if "measurements" in body.extra else {}
-    same = studio_truth(body.extra, meas.get("sex"))
-    if same is not None:
-        meas["studio"] = same
-        meas["studio_source"] = STUDIO_TRUTH_SOURCE
-    _atomic_json(truth / "measurements.json", meas)
+    _atomic_json(truth / "measurements.json", _truth_measurements(body.extra))
     phen = {}
     if "phenotype_names" in body.extra:
         phen = dict(zip((str(s) for s in body.extra["phenotype_names"]),
@@ -178,6 +178,50 @@ STUDIO_TRUTH_SOURCE = (
     "model's default pose) and tpose_q (upper arms horizontal, elbows straight) mapped into the "
     "model topology (anny_correspondence), joints by the model's joint regressor"
 )
+
+
+#: Modules whose code decides the same-definition truth (with the body model file they load).
+_TRUTH_MODULES = ("studio.body.measure", "studio.body.iso7250", "studio.body.skeleton", "studio.body.model")
+
+
+def truth_code_digest() -> str:
+    """Digest of what :func:`studio_truth`'s figures depend on besides the body file: the source
+    of the measurement modules and the shipped body model file."""
+    from studio.body.model import DATA_FILE
+
+    h = hashlib.sha256()
+    for name in _TRUTH_MODULES:
+        h.update(Path(importlib.import_module(name).__file__).read_bytes())
+    h.update(DATA_FILE.read_bytes() if DATA_FILE.is_file() else b"")
+    return h.hexdigest()[:16]
+
+
+def _truth_measurements(extra: dict) -> dict:
+    """``truth/measurements.json`` of a body file's arrays: Anny's own figures, and the
+    same-definition ones (:func:`studio_truth`) with the code digest they were computed by."""
+    meas = json.loads(str(extra["measurements"])) if "measurements" in extra else {}
+    same = studio_truth(extra, meas.get("sex"))
+    if same is not None:
+        meas["studio"] = same
+        meas["studio_source"] = STUDIO_TRUTH_SOURCE
+        meas["studio_code"] = truth_code_digest()
+    return meas
+
+
+def _refresh_truth(folder: Path, spec: SimSpec) -> None:
+    """Recompute a cached render's same-definition truth when the code that measures it changed
+    since it was rendered (the images and labels do not depend on that code)."""
+    path = Layout(folder).truth_measurements
+    try:
+        stored = json.loads(path.read_text())
+    except (OSError, ValueError):
+        stored = None
+    if stored is not None and ("studio" not in stored or stored.get("studio_code") == truth_code_digest()):
+        return
+    meas = _truth_measurements(load_body(spec.body_path).extra)
+    if meas != stored:
+        _atomic_json(path, meas)
+        log.info("%s: same-definition truth recomputed (measurement code changed)", path)
 
 
 def studio_truth(extra: dict, sex: str | None = None) -> dict[str, float] | None:
@@ -237,7 +281,8 @@ def ensure_rendered(spec_path: str | Path, seed: int = 0, cache_dir: str | Path 
 
     The session folder is ``<cache_dir>/seed<seed>`` (cache default: :func:`default_cache_dir`).
     A render is reused only when it finished (status ``complete``) from the same spec and
-    body file (digest in ``truth/scene.json``); otherwise it is rendered into a temporary
+    body file (digest in ``truth/scene.json``), its same-definition truth recomputed when the
+    measurement code changed since (:func:`truth_code_digest`); otherwise it is rendered into a temporary
     folder and renamed into place, so concurrent callers never see half a session.
     """
     spec = load_spec(spec_path)
@@ -245,6 +290,7 @@ def ensure_rendered(spec_path: str | Path, seed: int = 0, cache_dir: str | Path 
     folder = cache / f"seed{int(seed)}"
     digest = spec.digest()
     if _complete(folder, digest):
+        _refresh_truth(folder, spec)
         return folder
     cache.mkdir(parents=True, exist_ok=True)
     tmp = Path(tempfile.mkdtemp(prefix=f".seed{seed}-", dir=cache))

@@ -133,8 +133,12 @@ def test_ensure_rendered_caches_and_rerenders(tmp_path, monkeypatch):
     first = ensure_rendered(spec, seed=0)
     assert first == tmp_path / "xdg" / "studio" / "renders" / "tiny" / "seed0"  # never beside the spec
     stamp = (first / "frames.csv").stat().st_mtime_ns
+    truth = first / "truth" / "measurements.json"
+    planted = dict(json.loads(truth.read_text()), studio={"stature": 9.9}, studio_code="stale")
+    truth.write_text(json.dumps(planted))  # a same-definition truth from other measurement code
     assert ensure_rendered(spec, seed=0) == first
-    assert (first / "frames.csv").stat().st_mtime_ns == stamp
+    assert (first / "frames.csv").stat().st_mtime_ns == stamp  # images reused ...
+    assert "studio" not in json.loads(truth.read_text())  # ... truth recomputed (the blob has no canonical postures)
     spec.write_text(spec.read_text().replace("fps: 30", "fps: 25"))
     again = ensure_rendered(spec, seed=0)
     assert json.loads((again / "session.json").read_text())["fps"] == 25.0

@@ -196,3 +196,24 @@ def test_simulated_session_carries_both_truths(tmp_path, walk_truth):
     assert truth["studio"] == pytest.approx(walk_truth, abs=1e-12)
     assert "definitions" in truth["studio_source"] and truth["sex"] == "female"
     assert truth["waist_circumference"] == pytest.approx(0.8118, abs=1e-4)  # Anny's, kept as is
+
+
+def test_cached_render_truth_is_recomputed_when_the_measurement_code_changed(tmp_path, walk, walk_truth):
+    """A cached render keeps its images, but its same-definition truth follows the code: a stale
+    ``studio_code`` is recomputed on reuse, a current one is left alone (same bytes, same mtime)."""
+    from studio.simulate.session import _refresh_truth, truth_code_digest
+
+    path = tmp_path / "truth" / "measurements.json"
+    path.parent.mkdir()
+    stale = {"sex": "female", "stature": 1.6, "studio": {"stature": walk_truth["stature"] + 0.05},
+             "studio_code": "0000000000000000"}
+    path.write_text(json.dumps(stale))
+    spec = SimpleNamespace(body_path=ROOT / "walk" / "body.npz")
+    _refresh_truth(tmp_path, spec)
+    fresh = json.loads(path.read_text())
+    assert fresh["studio_code"] == truth_code_digest() != stale["studio_code"]
+    assert fresh["studio"]["stature"] == pytest.approx(walk_truth["stature"], abs=1e-9)
+    assert fresh["sex"] == json.loads(str(walk["measurements"]))["sex"]  # Anny's own figures from the body file
+    stamp = path.stat().st_mtime_ns
+    _refresh_truth(tmp_path, spec)
+    assert path.stat().st_mtime_ns == stamp

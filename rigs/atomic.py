@@ -53,12 +53,13 @@ def is_temporary(name: str | PathLike) -> bool:
     return name.startswith(".") and TEMP_MARK in name
 
 
-def remove_temporaries(folder: str | PathLike) -> list[Path]:
-    """Delete the temporary files a killed writer left in ``folder``; return what was removed."""
+def remove_temporaries(folder: str | PathLike, recursive: bool = False) -> list[Path]:
+    """Delete the temporary files a killed writer left in ``folder`` (and, with ``recursive``,
+    in its sub-folders); return what was removed. Only for a folder no other writer is using."""
     folder = Path(folder)
     removed = []
     if folder.is_dir():
-        for p in folder.iterdir():
+        for p in folder.rglob(f".*{TEMP_MARK}*") if recursive else folder.iterdir():
             if is_temporary(p.name) and p.is_file():
                 with contextlib.suppress(OSError):
                     p.unlink()

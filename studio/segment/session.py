@@ -379,7 +379,7 @@ def segment_session(
     for a camera without background frames, image sizes that disagree with the background
     model or the calibration, and a missing calibration when voting is requested.
     """
-    from rigs.atomic import atomic_write_json, remove_temporaries
+    from rigs.atomic import atomic_write_json
     from rigs.imageio import read_image
     from studio.execution import ExecutionError, open_runner, run_chains
     from studio.workspace import SEGMENTATION_RESERVED, WorkspaceError
@@ -444,9 +444,8 @@ def segment_session(
     if options.overlay_every > 0:
         folders += [ws.layout.segmentation_overlay(cam, 0).parent for cam in cameras]
         folders += [ws.layout.floor_votes(0).parent] if state["grid"] is not None else []
-    for folder in folders:  # the temporary files a killed run's writers left are cleared
+    for folder in folders:  # (check_writable cleared the temporary files a killed run's writers left)
         folder.mkdir(parents=True, exist_ok=True)
-        remove_temporaries(folder)
 
     results = []
     for i in skipped:

@@ -178,7 +178,11 @@ class Workspace:
     # ------------------------------------------------------------------ derived outputs
     def check_writable(self, folder: Path) -> Path:
         """Create ``folder`` (under the outputs) and prove it writable with a temporary file,
-        before any long work; a read-only session fails here, naming ``--out`` as the way out."""
+        before any long work; a read-only session fails here, naming ``--out`` as the way out.
+        The temporary files a killed run's writers left in it (and below) are cleared: a command
+        owns its output folder while it runs (one run per output folder at a time)."""
+        from rigs.atomic import remove_temporaries
+
         folder = Path(folder)
         try:
             folder.mkdir(parents=True, exist_ok=True)
@@ -187,6 +191,8 @@ class Workspace:
         except OSError as exc:
             raise WorkspaceError(f"{folder}: cannot write results there ({exc.strerror or exc}); "
                                  "give an output folder with --out DIR") from None
+        for path in remove_temporaries(folder, recursive=True):
+            log.info("%s: removed (a killed run's temporary file)", path)
         return folder
 
     def labels(self, camera: str, frame: int) -> np.ndarray:

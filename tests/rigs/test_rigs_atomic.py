@@ -78,3 +78,17 @@ def test_remove_temporaries_clears_only_leftovers(tmp_path):
     removed = remove_temporaries(tmp_path)
     assert [p.name for p in removed] == [".000002.png.tmp-abc123.png"]
     assert [p.name for p in tmp_path.iterdir()] == ["000001.png"]
+
+
+def test_remove_temporaries_recursive_reaches_sub_folders(tmp_path):
+    deep = tmp_path / "overlay" / "cam0"
+    deep.mkdir(parents=True)
+    (deep / "000001.png").write_bytes(b"keep")
+    (deep / ".000002.png.tmp-x1.png").write_bytes(b"torn")
+    (tmp_path / ".sequence.json.tmp-y2.json").write_bytes(b"torn")
+    assert remove_temporaries(tmp_path) == [tmp_path / ".sequence.json.tmp-y2.json"]  # not below by default
+    (tmp_path / ".sequence.json.tmp-y2.json").write_bytes(b"torn")
+    removed = remove_temporaries(tmp_path, recursive=True)
+    assert sorted(p.name for p in removed) == [".000002.png.tmp-x1.png", ".sequence.json.tmp-y2.json"]
+    assert sorted(str(p.relative_to(tmp_path)) for p in tmp_path.rglob("*") if p.is_file()) == [
+        "overlay/cam0/000001.png"]

@@ -85,6 +85,24 @@ def test_unwritable_outputs_fail_before_any_work(tmp_path):
     assert other.layout.truth_dir == tmp_path / "s" / "truth"
 
 
+def test_a_command_clears_what_a_killed_run_left_in_its_outputs(tmp_path):
+    """Every command checks its output folder before work (fit, light, report, export, segment): the
+    temporary files of a killed run's writers go, finished files and other folders stay."""
+    ws = Workspace.open(_session(tmp_path / "s", _calibration()))
+    fit, report = ws.layout.fit_dir, ws.layout.report_dir
+    (fit / "overlay" / "a").mkdir(parents=True)
+    report.mkdir()
+    kept = [fit / "000000.json", fit / "overlay" / "a" / "000000.png", report / ".index.html.tmp-r1.html"]
+    for p in kept:
+        p.write_bytes(b"x")
+    torn = [fit / ".000001.json.tmp-q9.json", fit / "overlay" / "a" / ".000001.png.tmp-z3.png"]
+    for p in torn:
+        p.write_bytes(b"half")
+    ws.check_writable(fit)
+    assert sorted(p for p in fit.rglob("*") if p.is_file()) == sorted(kept[:2])
+    assert kept[2].is_file()  # the report folder is the report command's
+
+
 def test_frame_selection_deduplicates_and_rejects_step_zero():
     frames = list(range(10))
     assert select_frames(None, frames) is None

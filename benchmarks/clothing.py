@@ -106,6 +106,17 @@ def _spec(p: dict, condition: str) -> str:
                       f"  skin_tone: {p['skin_tone']}\n{person}")
 
 
+def _check_poses(folder: Path, p: dict) -> str | None:
+    """Why ``folder``'s built body cannot serve subject ``p`` (other postures: a cache built with
+    another ``--poses``), or None."""
+    with np.load(folder / "body.npz") as z:
+        have = [str(s) for s in z["pose_names"]] if "pose_names" in z.files else None
+    if have is not None and have != p["poses"]:
+        return (f"{folder / 'body.npz'}: built with postures {have}, asked for {p['poses']} — ask for the "
+                f"--poses it was built with, or remove {folder} (its renders and results go with it) and build again")
+    return None
+
+
 def build(args) -> int:
     """Truth bodies (Anny) and the two specs of every subject (needs torch + anny)."""
     from rigs.atomic import atomic_write_text
@@ -118,7 +129,11 @@ def build(args) -> int:
         for cond in ("tight", "loose"):
             (folder / cond).mkdir(parents=True, exist_ok=True)
             atomic_write_text(folder / cond / "spec.yaml", _spec(p, cond))
-        if not (folder / "body.npz").is_file():
+        if (folder / "body.npz").is_file():
+            if (why := _check_poses(folder, p)) is not None:
+                print(why, file=sys.stderr)
+                return 1
+        else:
             todo[p["name"]] = {"kind": "lab", "poses": p["poses"], "seed": p["seed"], "gender": p["gender"],
                                "age_years": (20.0, 60.0)}
     if todo:
@@ -221,6 +236,9 @@ def run(args) -> int:
     for p in subjects(args.subjects, args.poses, args.quick):
         if not (root / p["name"] / "body.npz").is_file():
             print(f"{p['name']}: no truth body — run `build` first with torch + anny", file=sys.stderr)
+            return 1
+        if (why := _check_poses(root / p["name"], p)) is not None:
+            print(why, file=sys.stderr)
             return 1
         for cond in args.conditions:
             path = results / f"{p['name']}_{cond}.json"

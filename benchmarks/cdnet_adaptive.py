@@ -7,8 +7,10 @@ then make of it. So for fixed detection settings (``noise_scale``, ``distance``)
 state is the same for every gate, and one pass over frames 1–1200 (:class:`DetectionRun`)
 keeps what any gate needs: for each ground-truth frame, the pixels over the distance (their
 frame values, running mean and deviation just before the step). A gate setting is then replayed
-on those pixels by the same compiled step (:func:`studio.segment.adaptive.adaptive_step`),
-followed by the same morphology and geometry as ``apply`` — identical labels (checked in the
+on those pixels by the same compiled step (:func:`studio.segment.adaptive.adaptive_step`), its
+shadow rim grown on the frame's image (:func:`studio.segment.adaptive.penumbra_rim`: the rim only
+reaches loosely gated pixels, all of them over the distance, so all kept), followed by the same
+morphology and geometry as ``apply`` — identical labels (checked in the
 benchmark against full ``apply`` runs) at ~0.5 ms a frame instead of a 1200-frame run per setting.
 
 Every setting is scored on every ground-truth frame (:func:`studio.segment.tuning.cdnet_counts`),
@@ -22,7 +24,7 @@ import itertools
 import numpy as np
 
 from studio.segment import PERSON, AdaptiveSettings, clean_labels, learn_shadow_direction, learn_tint, shadow_geometry
-from studio.segment.adaptive import adaptive_step
+from studio.segment.adaptive import adaptive_step, penumbra_rim
 from studio.segment.self_shadow import StreamFrame, learn_stream_shadows, stream_frame
 from studio.segment.tuning import cdnet_counts, pick_operating_point, scores_from_counts
 
@@ -31,6 +33,10 @@ DETECTION_GRID = tuple(itertools.product((1.5, 2.0, 2.5), (8.0, 12.0, 16.0)))  #
 VALUE_RATIOS = ((0.05, 0.2), (0.05, 0.3), (0.08, 0.4), (0.05, 0.5))
 CHROMAS = (0.05, 0.1, 0.2, 0.3)
 FRACTIONS = (0.1, 0.15, 0.2, 0.25, 0.3)  # geometry: chord share of the shadow strip
+# shadow rim (AdaptiveSettings.penumbra), added by issue 18 and chosen on 470–699 only: rim 1 for every
+# gate; the grids (0,), (1,), (2,), (0, 1), (0, 1, 2) compared by the pick rule inside 470–699
+# (leave one block of 23 frames out, gap 10): label-free FPR-S 0.252 / 0.122 / 0.234 / 0.241 / 0.272, F 0.987–0.988
+PENUMBRAS = (1,)
 FPRS_LIMIT = 0.30  # the target's own limit, used as the pick rule's limit
 
 
@@ -79,10 +85,10 @@ class DetectionRun:
     def gated_labels(self, i: int, gate: AdaptiveSettings) -> np.ndarray:
         """``apply``'s labels of frame ``i`` (before geometry) with ``gate``'s shadow gate."""
         idx, values, mean, dev = self.pixels[i]
-        sub, _ = adaptive_step(values, mean.copy(), dev.copy(), gate, 10**9)
+        sub, _ = adaptive_step(values, mean.copy(), dev.copy(), gate, 10**9, rim=False)
         raw = np.zeros(self.shape, np.uint8)
         raw.reshape(-1)[idx] = sub[0]
-        return clean_labels(raw)
+        return clean_labels(penumbra_rim(raw, gate.penumbra))
 
     def tint(self, frames_: list[int], shadow_masks: dict) -> tuple[float, float, float]:
         """:func:`learn_tint` over ``frames_`` from their known shadow pixels (``shadow_masks[i]``)."""
@@ -121,13 +127,29 @@ def label_free_shadows(run: DetectionRun, frames_: list[int]):
     return learn_stream_shadows([run.stream[i] for i in frames_])
 
 
-def gate_grid(run: DetectionRun, gt_frames: list[int], truths: dict, roi, tint, direction) -> dict:
-    """Every colour gate with ``tint``, alone and with each geometry fraction along ``direction``,
-    scored on every ground-truth frame: ``{settings: (N, 8)}``."""
+def tint_purity(run: DetectionRun, learned, frames_: list[int], truths: dict) -> dict:
+    """The label-free tint's pixels (``learned.kept`` over ``frames_``, the frames it was learned
+    from) on the frames with truth: counts labelled shadow (50), car (255) and unknown (170), and
+    the purity shadow / (shadow + car). Truth is only counted here, never used to learn."""
+    n = {"shadow": 0, "car": 0, "unknown": 0}
+    for i, kept in zip(frames_, learned.kept):
+        if i not in truths:
+            continue
+        t = truths[i].reshape(-1)[run.stream[i].index[kept]]
+        n["shadow"] += int((t == 50).sum())
+        n["car"] += int((t == 255).sum())
+        n["unknown"] += int((t == 170).sum())
+    return {**n, "purity": n["shadow"] / max(n["shadow"] + n["car"], 1)}
+
+
+def gate_grid(run: DetectionRun, gt_frames: list[int], truths: dict, roi, tint, direction,
+              penumbras=PENUMBRAS) -> dict:  # fmt: skip
+    """Every colour gate with ``tint`` (and each shadow rim of ``penumbras``), alone and with each
+    geometry fraction along ``direction``, scored on every ground-truth frame: ``{settings: (N, 8)}``."""
     base = run.det.to_dict()
     settings = []
-    for vr, chroma in itertools.product(VALUE_RATIOS, CHROMAS):
-        gate = AdaptiveSettings.from_dict({**base, "value_ratio": vr, "chroma": chroma, "tint": tint})
+    for vr, chroma, rim in itertools.product(VALUE_RATIOS, CHROMAS, penumbras):
+        gate = AdaptiveSettings.from_dict({**base, "value_ratio": vr, "chroma": chroma, "tint": tint, "penumbra": rim})
         settings.append((gate, [AdaptiveSettings.from_dict({**gate.to_dict(), "shadow_direction": direction,
                                                             "shadow_fraction": f}) for f in FRACTIONS]))  # fmt: skip
     table = {}

@@ -15,7 +15,14 @@ ratios:
   ``value_ratio`` and every channel ratio ``I_c / μ_c`` within ``chroma`` of ``r · tint_c``
   (eq. 5.5's "saturation unchanged", with ``tint`` the per-camera colour of the shadowing light,
   learned from data by :func:`learn_tint`),
-* else person.
+* else person;
+* with ``penumbra`` = n > 0, a shadow's rim: a person pixel up to n 8-connected steps from the
+  gated shadow becomes shadow when it passes a loose gate (``r`` in ``value_ratio[0]`` –
+  ``penumbra_ratio``, channel ratios within ``penumbra_chroma · r`` of ``r · tint_c``). A cast
+  shadow's edge (penumbra, and the lit road mixed into it by blur and JPEG) is lighter than its
+  core and misses the core's ratio band; a dark car misses it too, but only its pixels touching
+  the shadow are at risk (hysteresis, as Canny's two thresholds). The running update depends on
+  background / foreground only, so the rim never changes the model.
 
 The per-pixel work is one compiled loop (numba, ``cache=True``): the labels, the value ratio for
 voting and the update of ``μ`` and ``δ`` in a single read of the frame (~2.3 ms of CPU for 656×490 on
@@ -33,7 +40,7 @@ from numba import njit
 
 from studio.segment.errors import SegmentationError
 
-__all__ = ["AdaptiveSettings", "adaptive_step", "learn_tint"]
+__all__ = ["AdaptiveSettings", "adaptive_step", "learn_tint", "penumbra_rim"]
 
 
 @dataclass(frozen=True)
@@ -59,13 +66,17 @@ class AdaptiveSettings:
     # from an object to its shadow, and the share of the chord a shadow pixel may have ahead of it
     shadow_direction: tuple[float, float] | None = None
     shadow_fraction: float = 0.2
+    # shadow rim (hysteresis): steps of growth from the gated shadow into loosely gated person pixels
+    penumbra: int = 0
+    penumbra_ratio: float = 0.6  # loose gate: largest brightness ratio
+    penumbra_chroma: float = 0.4  # loose gate: channel-ratio band, relative
 
     def __post_init__(self):
         for name in ("rate", "foreground_rate"):
             v = getattr(self, name)
             if not (0.0 <= v <= 1.0):
                 raise SegmentationError(f"AdaptiveSettings.{name}: expected a rate in [0, 1], got {v!r}")
-        for name in ("noise_scale", "noise_floor", "distance", "chroma"):
+        for name in ("noise_scale", "noise_floor", "distance", "chroma", "penumbra_chroma"):
             v = getattr(self, name)
             if not (math.isfinite(v) and v > 0):
                 raise SegmentationError(f"AdaptiveSettings.{name}: expected a positive number, got {v!r}")
@@ -83,6 +94,12 @@ class AdaptiveSettings:
             )
         if not (0.0 < self.shadow_fraction <= 1.0):
             raise SegmentationError(f"AdaptiveSettings.shadow_fraction: expected (0, 1], got {self.shadow_fraction!r}")
+        if not (isinstance(self.penumbra, int) and self.penumbra >= 0):
+            raise SegmentationError(f"AdaptiveSettings.penumbra: expected an int >= 0, got {self.penumbra!r}")
+        if not self.penumbra_ratio > lo:
+            raise SegmentationError(
+                f"AdaptiveSettings.penumbra_ratio: expected above value_ratio's lower {lo}, got {self.penumbra_ratio!r}"
+            )
         if self.warmup < 0:
             raise SegmentationError(f"AdaptiveSettings.warmup: expected >= 0, got {self.warmup!r}")
 
@@ -91,7 +108,8 @@ class AdaptiveSettings:
                 "noise_floor": self.noise_floor, "distance": self.distance, "value_ratio": list(self.value_ratio),
                 "chroma": self.chroma, "tint": list(self.tint), "warmup": self.warmup,
                 "shadow_direction": None if self.shadow_direction is None else list(self.shadow_direction),
-                "shadow_fraction": self.shadow_fraction}  # fmt: skip
+                "shadow_fraction": self.shadow_fraction, "penumbra": self.penumbra,
+                "penumbra_ratio": self.penumbra_ratio, "penumbra_chroma": self.penumbra_chroma}  # fmt: skip
 
     @classmethod
     def from_dict(cls, data: dict) -> "AdaptiveSettings":
@@ -100,11 +118,14 @@ class AdaptiveSettings:
         d["tint"] = tuple(float(v) for v in d["tint"])
         if d.get("shadow_direction") is not None:
             d["shadow_direction"] = tuple(float(v) for v in d["shadow_direction"])
+        if "penumbra" in d:
+            d["penumbra"] = int(d["penumbra"])
         return cls(**d)
 
 
 @njit(cache=True, nogil=True, fastmath=True, error_model="numpy")
-def _step(frame, mean, dev, labels, ratio8, rate, fg_rate, k, floor, dist, lo, hi, chroma, tint, scale):
+def _step(frame, mean, dev, labels, ratio8, rate, fg_rate, k, floor, dist, lo, hi, chroma, tint, scale,
+          loose_hi, loose_chroma):
     h, w = labels.shape
     t0, t1, t2 = tint[0], tint[1], tint[2]
     for y in range(h):
@@ -137,6 +158,12 @@ def _step(frame, mean, dev, labels, ratio8, rate, fg_rate, k, floor, dist, lo, h
                             and abs((v1 + 1.0) / (m1 + 1.0) - r * t1) <= band
                             and abs((v2 + 1.0) / (m2 + 1.0) - r * t2) <= band):
                         label = 2
+                if loose_hi > 0.0 and label == 1 and lo <= r <= loose_hi:
+                    band = loose_chroma * r
+                    if (abs((v0 + 1.0) / (m0 + 1.0) - r * t0) <= band
+                            and abs((v1 + 1.0) / (m1 + 1.0) - r * t1) <= band
+                            and abs((v2 + 1.0) / (m2 + 1.0) - r * t2) <= band):
+                        label = 3  # loosely gated person: the rim may take it (_grow)
             labels[y, x] = label
             a = rate if label == 0 else fg_rate
             mean[y, x, 0] = m0 + a * d0
@@ -147,8 +174,49 @@ def _step(frame, mean, dev, labels, ratio8, rate, fg_rate, k, floor, dist, lo, h
             dev[y, x, 2] += a * (a2 - dev[y, x, 2])
 
 
+@njit(cache=True, nogil=True)
+def _grow(labels, steps):  # labels (H, W) uint8, 3 = loosely gated person
+    """Rim growth in place: ``steps`` times, every loosely gated person pixel (3) with an
+    8-neighbour shadow (2) becomes shadow; the rest of 3 is person (1) at the end."""
+    h, w = labels.shape
+    for _ in range(steps):
+        changed = 0
+        for y in range(h):
+            for x in range(w):
+                if labels[y, x] != 3:
+                    continue
+                hit = False
+                for yy in range(max(y - 1, 0), min(y + 2, h)):
+                    for xx in range(max(x - 1, 0), min(x + 2, w)):
+                        if labels[yy, xx] == 2:
+                            hit = True
+                if hit:
+                    labels[y, x] = 4  # shadow from this step on (not seen as 2 within the step)
+                    changed += 1
+        for y in range(h):
+            for x in range(w):
+                if labels[y, x] == 4:
+                    labels[y, x] = 2
+        if changed == 0:
+            break
+    for y in range(h):
+        for x in range(w):
+            if labels[y, x] == 3:
+                labels[y, x] = 1
+
+
+def penumbra_rim(labels: np.ndarray, steps: int) -> np.ndarray:
+    """Grow the shadow rim in place on raw labels from ``adaptive_step(..., rim=False)``
+    ((H, W) uint8 with 3 marking loosely gated person pixels): ``steps`` rounds of 8-connected
+    growth from shadow (2) into 3; what is left of 3 becomes person (1). Returns ``labels``."""
+    if labels.ndim != 2 or labels.dtype != np.uint8:
+        raise SegmentationError(f"penumbra_rim: labels must be (H, W) uint8, got {labels.shape} {labels.dtype}")
+    _grow(labels, int(steps))
+    return labels
+
+
 def adaptive_step(
-    frame: np.ndarray, mean: np.ndarray, dev: np.ndarray, settings: AdaptiveSettings, seen: int
+    frame: np.ndarray, mean: np.ndarray, dev: np.ndarray, settings: AdaptiveSettings, seen: int, rim: bool = True
 ) -> tuple[np.ndarray, np.ndarray]:
     """Label one frame and update ``mean`` / ``dev`` in place.
 
@@ -157,6 +225,8 @@ def adaptive_step(
     frame : (H, W, 3) uint8 or uint16 RGB.
     mean, dev : (H, W, 3) float32 running mean and mean absolute deviation, in 8-bit levels.
     seen : frames the model has adapted to so far (warm-up: rate ``1/(seen+1)``).
+    rim : grow the shadow rim (``settings.penumbra``) here; False leaves the loosely gated person
+        pixels as 3 for :func:`penumbra_rim` (a caller holding only some of the frame's pixels).
 
     Returns
     -------
@@ -172,7 +242,10 @@ def adaptive_step(
     _step(frame, mean, dev, labels, ratio8, np.float32(rate), np.float32(fg_rate), np.float32(s.noise_scale),
           np.float32(s.noise_floor), np.float32(s.distance), np.float32(s.value_ratio[0]),
           np.float32(min(s.value_ratio[1], 1e30)), np.float32(s.chroma), np.asarray(s.tint, np.float32),
-          np.float32(scale))  # fmt: skip
+          np.float32(scale), np.float32(s.penumbra_ratio if s.penumbra else 0.0),
+          np.float32(s.penumbra_chroma))  # fmt: skip
+    if s.penumbra and rim:
+        _grow(labels, s.penumbra)
     return labels, ratio8
 
 

@@ -81,8 +81,8 @@ def test_on_floor_moves_each_mesh_so_its_lowest_vertex_is_at_z0():
 
 def test_batch_stands_every_body_on_the_floor(frames):
     """Single-frame starts floating 4 cm above the floor (and sunk 3 cm into it): with ``floor``
-    (the default) every batch body's lowest vertex is at z = 0 and the pose search leaves the
-    root height alone; without it the starts' heights stay off the floor."""
+    (the default under loose clothing) every batch body's lowest vertex is at z = 0 and the pose
+    search leaves the root height alone; without it the starts' heights stay off the floor."""
     from dataclasses import replace
 
     model, fr = frames
@@ -92,9 +92,10 @@ def test_batch_stands_every_body_on_the_floor(frames):
         pose = f.pose.copy()
         pose[2] += dz - model.vertices(f.shape, f.pose)[:, 2].min()
         shifted.append(replace(f, pose=pose))
-    opts = replace(BATCH, rounds=1, pose_evaluations=20, shape_evaluations=20, final_evaluations=0)
+    opts = replace(BATCH, rounds=1, pose_evaluations=20, shape_evaluations=20, final_evaluations=0, floor=True)
     on = batch_fit(shifted, gender="female", options=opts)
-    assert opts.floor
+    assert BatchOptions(clothing="loose").stands and not BatchOptions(clothing="tight").stands
+    assert on.to_json()["settings"]["floor"] is True
     for shape_pose in on.poses:
         assert abs(model.vertices(on.shape, shape_pose)[:, 2].min()) < 1e-9
     off = batch_fit(shifted, gender="female", options=replace(opts, floor=False))

@@ -33,7 +33,7 @@ sys.path.insert(0, str(ROOT / "benchmarks"))
 PELVIS, HEAD = 0, 2
 HIPS, KNEES, ANKLES = (9, 12), (10, 13), (11, 14)
 #: variants: BatchOptions overrides
-VARIANTS: dict[str, dict] = {"base": {"floor": False}, "floor": {"floor": True}}
+VARIANTS: dict[str, dict] = {"base": {"floor": False}, "release": {"floor": False}, "floor": {"floor": True}}
 
 
 def _angle(a: np.ndarray, b: np.ndarray) -> float:

@@ -149,8 +149,8 @@ def clothing_targets(frame: BatchFrame, options: BatchOptions) -> dict:
 def on_floor(V: np.ndarray) -> np.ndarray:
     """Meshes (..., V, 3) moved vertically so that each one's lowest vertex lies at z = 0. Loose
     trousers and skirts hide the feet and λ_c barely pulls, so nothing held the loose batch's soles
-    at the floor: on the dev split they lay 20–85 mm below it or up to 70 mm above it, with knees
-    bent 10–35° more than the truth, trading stature for pose."""
+    at the floor: on the dev split they lay up to 84 mm below it or 68 mm above it, with knees
+    bent 10–34° more than the truth, trading stature for pose."""
     V = np.array(V, dtype=np.float64)
     V[..., 2] -= V[..., 2].min(axis=-1)[..., None]
     return V

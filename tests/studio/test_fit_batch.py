@@ -7,7 +7,7 @@ from studio.body import BodyModel, measure
 from studio.body.skeleton import pose_slices
 from studio.fit import FitOptions, fit_frame
 from studio.fit.batch import (GENDER_PRIOR_WEIGHT, BatchFrame, BatchOptions, batch_fit, choose_frames, convert_shape,
-                               gender_scores, stature_evidence)
+                               gender_scores, on_floor, stature_evidence)
 from studio.fit.errors import FitError
 from studio.fit.init import standing_pose
 from studio.render import silhouette
@@ -70,6 +70,37 @@ def test_two_frames_of_one_person_agree_with_their_single_frame_fits(frames):
     obj = res.to_json()
     assert obj["frames"] == [0, 1] and obj["gender"] == "female" and obj["gender_margin"] is None
     assert set(obj["poses"]) == {"0", "1"} and len(obj["shape"]) == model.n_shape
+
+
+def test_on_floor_moves_each_mesh_so_its_lowest_vertex_is_at_z0():
+    V = np.array([[[0.0, 0.0, 0.05], [1.0, 2.0, 1.8]], [[0.0, 0.0, -0.03], [0.5, 0.5, 1.0]]])
+    out = on_floor(V)
+    assert np.allclose(out[:, :, 2], [[0.0, 1.75], [0.0, 1.03]])
+    assert np.array_equal(out[:, :, :2], V[:, :, :2]) and V[0, 0, 2] == 0.05  # x, y kept; input untouched
+
+
+def test_batch_stands_every_body_on_the_floor(frames):
+    """Single-frame starts floating 4 cm above the floor (and sunk 3 cm into it): with ``floor``
+    (the default under loose clothing) every batch body's lowest vertex is at z = 0 and the pose
+    search leaves the root height alone; without it the starts' heights stay off the floor."""
+    from dataclasses import replace
+
+    model, fr = frames
+    shifted = []
+    for k, dz in (("A0", 0.04), ("A1", -0.03)):
+        f = fr[k][0]
+        pose = f.pose.copy()
+        pose[2] += dz - model.vertices(f.shape, f.pose)[:, 2].min()
+        shifted.append(replace(f, pose=pose))
+    opts = replace(BATCH, rounds=1, pose_evaluations=20, shape_evaluations=20, final_evaluations=0, floor=True)
+    on = batch_fit(shifted, gender="female", options=opts)
+    assert BatchOptions(clothing="loose").stands and not BatchOptions(clothing="tight").stands
+    assert on.to_json()["settings"]["floor"] is True
+    for shape_pose in on.poses:
+        assert abs(model.vertices(on.shape, shape_pose)[:, 2].min()) < 1e-9
+    off = batch_fit(shifted, gender="female", options=replace(opts, floor=False))
+    lows = [model.vertices(off.shape, p)[:, 2].min() for p in off.poses]
+    assert max(abs(z) for z in lows) > 0.01, lows
 
 
 def test_a_batch_mixing_two_people_is_flagged(frames):

@@ -68,7 +68,7 @@ def _relabel(labels: np.ndarray, out: np.ndarray, dx: float, dy: float, fraction
 
 
 def shadow_geometry(
-    labels: np.ndarray, direction: tuple[float, float], fraction: float = 0.2, reach: int = 96
+    labels: np.ndarray, direction: tuple[float, float], fraction: float = 0.2, reach: int | None = None
 ) -> np.ndarray:
     """Shadow pixels not at the light-opposite end of their foreground region become person.
 
@@ -79,7 +79,11 @@ def shadow_geometry(
     direction : (dx, dy) image direction from an object to its cast shadow (need not be unit).
     fraction : largest share of the chord through a pixel along ``direction`` that may lie
         ahead of a shadow pixel (0.2: the shadow strip is the last fifth of object + shadow).
-    reach : longest walk in pixels each way (longer chords count as ``reach``).
+    reach : longest walk in pixels each way (longer chords count as ``reach``); None (default):
+        ``H + W``, longer than any chord, so the test is the chord share at every object size.
+        (Until issue 18's fourth CDnet evaluation the default was 96: a shadow pixel with more than
+        ~17 px of foreground ahead, at fraction 0.15, went back to the object whenever the chord
+        was over 96 px, however long the object.)
 
     Returns
     -------
@@ -94,6 +98,8 @@ def shadow_geometry(
         raise SegmentationError(f"shadow_geometry: direction must be a non-zero (dx, dy), got {direction!r}")
     if not (0.0 < fraction <= 1.0):
         raise SegmentationError(f"shadow_geometry: fraction must be in (0, 1], got {fraction!r}")
+    if reach is None:
+        reach = labels.shape[0] + labels.shape[1]
     out = labels.copy()
     _relabel(labels, out, dx / norm, dy / norm, float(fraction), int(max(reach, 2)))
     return out

@@ -152,3 +152,23 @@ def test_compiled_walk_matches_the_plain_reference(direction, fraction):
     ref = _reference(labels, direction, fraction, reach=40)
     assert np.array_equal(got, ref)
     assert 0 < (got != labels).sum() < (labels == SHADOW).sum()
+
+
+def test_long_object_keeps_its_shadow_at_any_size():
+    """A 150-row truck (rows 20-169) casting a 20-row shadow (rows 170-189) straight down: the
+    chord is 170 px, the strip 20 / 170 = 0.118 of it. At fraction 0.15 a pixel stays shadow when
+    its exit e <= 0.15 * 170 = 25.5: all 20 shadow rows and the truck's last 5 (dark, gated) rows.
+    The old cap (reach 96) walked at most 96 px back: a shadow pixel with e steps ahead needed
+    e / 0.15 - e + 1 <= 96 steps behind, e <= 16, so the 4 shadow rows next to the truck went back."""
+    lab = np.zeros((220, 40), np.uint8)
+    lab[20:170, 10:30] = PERSON
+    lab[165:190, 10:30] = SHADOW  # 5 dark truck rows and the 20 shadow rows: the gate's view
+    new = shadow_geometry(lab, (0.0, 1.0), fraction=0.15)
+    assert np.array_equal(np.nonzero((new == SHADOW).any(1))[0], np.arange(165, 190))
+    assert (new[170:190, 10:30] == SHADOW).all()
+    old = shadow_geometry(lab, (0.0, 1.0), fraction=0.15, reach=96)
+    assert np.array_equal(np.nonzero((old == SHADOW).any(1))[0], np.arange(174, 190))
+    # the same scene drawn at half size: the same share of rows kept (scale-free)
+    half = cv2.resize(lab, (20, 110), interpolation=cv2.INTER_NEAREST)
+    kept = np.nonzero((shadow_geometry(half, (0.0, 1.0), fraction=0.15) == SHADOW).any(1))[0]
+    assert kept[0] == 83 and kept[-1] == 94  # rows 165-189 halved (82.5-94.5): the strip and ~2 truck rows

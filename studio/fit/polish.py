@@ -4,17 +4,20 @@ silhouette cost (eq. 4.4–4.6), with the true cost deciding whether its answer 
 The silhouette cost is piecewise constant in the parameters (masks are counted in whole
 pixels), so the fit searches it with Nelder–Mead, which in the ~40 dimensions of pose + shape
 stalls short of the cost's own minimum. :func:`contour_residuals` gives a residual vector whose
-squared sum stands in for the same two truncated chamfer directions of eq. 4.5 per view, but is
-smooth in the parameters: every model vertex projected into a view reads the observed
+squared sum stands in for the two truncated chamfer directions of eq. 4.5 per view but is
+smooth in the parameters: every (second) model vertex projected into a view reads the observed
 silhouette's truncated distance map ``C^τ(F^o)`` bilinearly (model → observed), and every
-observed pixel near the observed outline reads its distance to the nearest projected vertex,
-truncated at τ (observed → model; the model's point cloud stands in for its silhouette). Each
-direction is a root mean square per view (``/ sqrt(n)``), so the squared sum is eq. 4.5 with
-squared distances. The Jacobian is a forward difference of the projections of one batch of
-bodies, chained with the distance map's gradient and with the nearest vertex held (the
-derivative of a minimum). :func:`lsq_polish` runs :func:`scipy.optimize.least_squares`
-(``trf``, the joint limits and ±3 σ shape as bounds) and keeps its answer only if the fit's
-own cost (:class:`~studio.fit.objective.FrameObjective`) is lower there.
+observed pixel near the observed outline that the model's silhouette does not cover reads its
+distance to the nearest projected vertex, truncated at τ (observed → model; the model's point
+cloud stands in for its outline, a covered pixel counts 0 as in eq. 4.4). A distance ``d``
+enters as ``d / sqrt(d + 1 px)`` divided by the square root of the direction's sample count, so
+the squared sum is, far from 0, the sum over views of the two mean distances, eq. 4.5. The
+Jacobian is a forward difference of the projections of one batch of bodies, chained with the
+distance map's gradient, and with the nearest vertex and the coverage held (the derivative of
+a minimum). :func:`lsq_polish` runs :func:`scipy.optimize.least_squares` (``trf``, the joint
+limits and ±3 σ shape as bounds) and keeps the iterate the fit's own cost
+(:class:`~studio.fit.objective.FrameObjective`, eq. 4.6 with its priors) likes best, the start
+if none is lower: the stand-in's minimum is near the cost's, not on it.
 """
 
 from __future__ import annotations
@@ -61,7 +64,7 @@ def contour_residuals(obj, level: int = 0, balance: float = 1.0, l1: float | Non
     """(residuals, jacobian) of ``obj`` (a :class:`~studio.fit.objective.FrameObjective`) at
     ``level``: ``residuals(x) -> (M,)``, ``jacobian(x, h) -> (M, D)`` (forward differences of
     step ``h`` (D,)). See the module docstring for the residuals; ``balance`` weights the observed →
-    model direction against the other."""
+    model direction against the other, ``l1`` is the smoothing of :func:`_root`."""
     import cv2
     from scipy.spatial import cKDTree
 
@@ -135,10 +138,13 @@ def contour_residuals(obj, level: int = 0, balance: float = 1.0, l1: float | Non
 @one_blas_thread  # the trust region's SVD of a ~18000 × 40 Jacobian: 0.06 s on one thread, 0.2–0.5 s on two
 def lsq_polish(obj, x0, bounds, scale, *, level: int = 0, max_nfev: int = 12, balance: float = 1.0,
                l1: float | None = 1.0) -> tuple[np.ndarray, float, dict]:
-    """Trust-region least squares (``trf``) on :func:`contour_residuals` from ``x0`` within
-    ``bounds`` = (lo, hi), ``x_scale=scale`` (D,) (the parameters' typical steps). Returns the
-    parameters, their cost by ``obj`` (eq. 4.6 with its priors) and a record; ``x0`` itself
-    when the cost does not fall."""
+    """Trust-region least squares (``trf``, at most ``max_nfev`` iterations) on
+    :func:`contour_residuals` from ``x0`` within ``bounds`` = (lo, hi), ``x_scale=scale`` (D,)
+    (the parameters' typical steps; the Jacobian's step is ``FD_STEP`` of them). Returns the
+    iterate with the lowest cost by ``obj`` (eq. 4.6 with its priors; ``x0`` when none is lower),
+    that cost, and a record: ``cost_before``, ``costs`` (every iterate's), ``nfev``, ``njev``.
+    ``l1``: the smoothing of :func:`_root` (None: squared distances); ``balance``: the weight of
+    the observed → model direction."""
     from scipy.optimize import least_squares
 
     lo, hi = (np.asarray(b, float) for b in bounds)

@@ -76,6 +76,9 @@ class FitOptions:
     the true body, median surface 9.1 → 6.2 mm (mean 11.5 → 9.3, worst 36.2 → 34.7: a half squat
     from the wrong start), P/R 0.939/0.951 → 0.962/0.962, joints 31.0 → 22.4 mm, CPU 12.9 →
     11.3 s per frame; with the final stage kept at 900 evaluations 6.2 mm, 12.7 s (so 500).
+    Held out (120 frames, once, variant ``lsq-polish``): 119 frames closer and at a lower cost,
+    median surface 9.6 → 6.3 mm, p90 17.3 → 12.2, P/R 0.935/0.945 → 0.961/0.962, ``ok`` 67 → 83 %,
+    CPU 12.6 → 11.0 s per frame (mean).
     ``stature_steps``: relative stature changes searched around the library's stature with its
     best start (:func:`studio.fit.init.stature_search`, e.g. its ``STATURE_STEPS``); off by
     default. On the dev people (28 frames, with the distal stage and the library without mirror

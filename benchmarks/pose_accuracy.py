@@ -20,7 +20,10 @@ folder, so the ``full`` figures of the older code stay as measured), ``distal-nm
 options, fitted by the code that refines the distal joints at full resolution before the final
 stage, ``FitOptions.distal_share``: the model-ceiling study, ``benchmarks/pose_ceiling.py``);
 dev experiments of that study: ``distal`` (with a library without mirror twins) and
-``stature-distal`` (that, and the library's stature searched finely, ``FitOptions.stature_steps``). ``--families`` fits only the frames
+``stature-distal`` (that, and the library's stature searched finely, ``FitOptions.stature_steps``);
+``lsq-polish`` (the default options of the code that polishes every parameter by least squares
+before a shorter final stage, ``FitOptions.polish_iterations``, the distal stage off: issue 13,
+``benchmarks/polish_compare.py``). ``--families`` fits only the frames
 of the named posture families (e.g. ``--families seated`` for ``no-support``).
 
 Splits (``--split``): ``held-out`` (the default, seeds from 1000, only ever measured: the figures
@@ -56,7 +59,7 @@ VARIANTS = {"full": {}, "no-library": {"start": "stride"}, "no-rival": {"rival_h
             "no-limb": {"limb_particles": 0}, "no-support": {"find_support": False},
             "retry": {"retries": 1}, "arm-states": {}, "distal-nm": {},
             "stature-distal": {"stature_steps": (-0.06, -0.045, -0.03, -0.015, 0.0, 0.015, 0.03, 0.045, 0.06)},
-            "distal": {}}
+            "distal": {}, "lsq-polish": {}}
 STANDING = ("a_pose", "t_pose", "arms_overhead", "hands_on_hips", "arm_forward", "arms_crossed", "wide_stance",
             "torso_twist")
 

@@ -33,9 +33,11 @@
 4. Staged Nelder–Mead (§4.7.4, :func:`studio.optimize.thesis_stages`) refines root + shape,
    the limbs outward, then everything, at the middle level; each limb is then re-searched by a
    small partitioned particle filter (a forearm bent the wrong way is a minimum Nelder–Mead
-   cannot leave); at full resolution the distal joints (forearms, shins, hands, feet, head),
-   then root + shape + trunk are refined last. Joint limits
-   are optimiser bounds, so they always hold.
+   cannot leave); at full resolution every parameter is then polished by trust-region least
+   squares on a smooth stand-in of the cost (:mod:`studio.fit.polish`; Nelder–Mead over ~40
+   parameters stalls short of the cost's minimum), and root + shape + trunk are refined last
+   by Nelder–Mead (``distal_share``: a Nelder–Mead stage of the distal joints before it, off by
+   default). Joint limits are optimiser bounds, so they always hold.
 5. The quality gates (:func:`studio.fit.quality.fit_quality`) judge the result: ``quality``
    in the result, status ``ok`` / ``suspect`` / ``failed`` with the reasons.
 """
@@ -57,6 +59,7 @@ from studio.fit.init import hull_centroid, hull_height, initial_poses, stature_s
 from studio.fit.library import library_match, stand_on_floor
 from studio.fit.objective import CylinderObjective, FrameObjective, pose_bounds
 from studio.fit.options import FitOptions
+from studio.fit.polish import lsq_polish
 from studio.fit.props import find_support
 from studio.fit.quality import fit_quality, refused_quality, screen_masks
 from studio.fit.search import _arm_states, _heading, _part_groups, _partitioned_search, _partitions, _pose_sigma
@@ -383,6 +386,14 @@ def fit_frame(
                                    extra=_arm_states(model, limbs) if previous_pose is None else None)
     timings["nelder_mead"] = time.perf_counter() - t
     t = time.perf_counter()
+    polish = None
+    if options.polish_iterations:
+        # trust-region least squares on a smooth stand-in of the cost, every parameter at once at
+        # full resolution (Nelder–Mead over ~40 parameters stalls short of the cost's minimum);
+        # its best iterate by the cost itself is kept
+        x_nm, _, polish = lsq_polish(obj, x_nm, (blo, bhi), step, level=final, max_nfev=options.polish_iterations)
+    timings["polish"] = time.perf_counter() - t
+    t = time.perf_counter()
     last = [Stage(tuple(range(6)) + tuple(shape_idx) + tuple(i for g in _part_groups()[:1] for i in g),
                   options.final_evaluations, "final")]
     n_distal = options.distal_share * options.final_evaluations
@@ -405,6 +416,8 @@ def fit_frame(
     if rival_cost is not None:
         costs["search_rival_heading"] = rival_cost
     costs["nelder_mead_refine"] = float(nm.cost)
+    if polish is not None:
+        costs["polish"] = [polish["cost_before"], min([polish["cost_before"], *polish["costs"]])]
     if start_family is not None:
         costs["start_family"] = start_family
     if init_height is not None:

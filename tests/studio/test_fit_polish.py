@@ -1,0 +1,87 @@
+"""Issue 13: the least-squares polish of a fitted frame (:mod:`studio.fit.polish`)."""
+
+import numpy as np
+import pytest
+
+from studio.body import BodyModel
+from studio.body.skeleton import POSE_SIZE, pose_slices
+from studio.fit import FitOptions
+from studio.fit.evaluate import joint_error
+from studio.fit.frame import build_targets
+from studio.fit.objective import FrameObjective, pose_bounds
+from studio.fit.polish import _root, contour_residuals, lsq_polish
+from studio.render import silhouette
+
+from test_fit_frame import ring_cameras, true_body
+
+
+@pytest.fixture(scope="module")
+def frame():
+    """An own-model body in 4 views (328×246), its objective at full resolution (3 shape
+    coefficients free) and a start 2–3 cm and 0.1–0.15 rad off."""
+    model = BodyModel.load("female")
+    cams = ring_cameras()
+    shape, pose = true_body(model)
+    masks = [silhouette(c, model.vertices(shape, pose), model.faces) for c in cams]
+    targets = build_targets(masks, [c.name for c in cams], FitOptions(levels=(0, 0, 0)))
+    obj = FrameObjective(model, cams, targets, shape, 3)
+    sl = pose_slices()
+    start = pose.copy()
+    start[:2] += [0.02, -0.03]
+    start[5] += 0.1
+    start[sl[3]] += [0.15, -0.1, 0.0]  # left upper arm
+    start[sl[10]] += 0.15  # left knee
+    start[sl[13]] += 0.1  # right knee
+    sig = np.sqrt(model.eigenvalues[:3])
+    lo, hi = pose_bounds(model, pose[:2])
+    bounds = (np.concatenate([lo, -3 * sig]), np.concatenate([hi, 3 * sig]))
+    step = np.concatenate([np.full(POSE_SIZE, 0.08), 0.5 * sig])
+    step[:3] = 0.03
+    x0 = obj.pack(shape, model.clip_pose(start))
+    return model, obj, shape, pose, x0, bounds, step
+
+
+def test_the_residuals_square_to_the_distances_and_the_jacobian_matches_differences(frame):
+    model, obj, shape, pose, x0, bounds, step = frame
+    d = np.array([0.0, 0.5, 3.0, 20.0])
+    r, slope = _root(d, 1.0)
+    np.testing.assert_allclose(r**2, d**2 / (d + 1))  # ≈ d far from 0, as eq. 4.4 sums distances
+    np.testing.assert_allclose(slope, (_root(d + 1e-6, 1.0)[0] - r) / 1e-6, rtol=1e-4)
+    res, jac = contour_residuals(obj)
+    x_true = obj.pack(shape, pose)
+    # the true body explains its masks (cost 0; the stand-in 0.14 against 1.51: outline vertices
+    # read the distance map bilinearly across the outline's pixel)
+    assert np.sum(res(x_true) ** 2) < 0.1 * np.sum(res(x0) ** 2)
+    J = jac(x0, 0.05 * step)
+    assert J.shape == (len(res(x0)), obj.size)
+    # along the steepest descent of the squared sum, the sum falls as J predicts (within 2×)
+    r0 = res(x0)
+    d = -(J.T @ r0) * step**2
+    d *= 0.01 / np.max(np.abs(d[3:POSE_SIZE]))  # the largest joint turn 0.01 rad
+    predicted = 2 * r0 @ (J @ d)
+    measured = np.sum(res(x0 + d) ** 2) - np.sum(r0**2)
+    assert predicted < 0 and 0.5 * predicted > measured > 2 * predicted
+
+
+def test_polish_lowers_the_cost_and_recovers_the_pose(frame):
+    """From 2–3 cm and 0.1–0.15 rad off, 15 least-squares iterations take the cost from 1.60 px
+    to 0.22 and the joints from 41 to 12 mm off the truth; Nelder–Mead over the same 33
+    parameters with 200 evaluations reaches 0.52 px, 22 mm."""
+    from studio.optimize import Stage, staged_nelder_mead
+
+    model, obj, shape, pose, x0, bounds, step = frame
+    V_true = model.vertices(shape, pose)
+
+    def joints_off(x):
+        s, p = obj.split(x[None])
+        return joint_error(model, model.vertices(s[0], model.clip_pose(p[0])), V_true)[0]
+
+    c0 = float(obj(x0[None], 0)[0])
+    x, c, rec = lsq_polish(obj, x0, bounds, step, max_nfev=15)
+    nm = staged_nelder_mead(obj.scalar(0), x0, [Stage(tuple(range(obj.size)), 200)], bounds=bounds, step=step * 0.5,
+                            adaptive=True)
+    assert rec["cost_before"] == pytest.approx(c0) and c0 > 1.5
+    assert c < 0.3 and c == pytest.approx(float(obj(x[None], 0)[0])) and c == pytest.approx(min(rec["costs"]))
+    assert joints_off(x0) > 0.035 and joints_off(x) < 0.015
+    assert np.all(x >= bounds[0]) and np.all(x <= bounds[1])
+    assert nm.cost > 2 * c and joints_off(nm.x) > joints_off(x)

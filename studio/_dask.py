@@ -33,9 +33,11 @@ class WorkerSetup(distributed.WorkerPlugin):
 @contextlib.contextmanager
 def local_cluster(n_workers: int) -> Iterator[str]:
     """A ``LocalCluster`` of ``n_workers`` single-threaded processes on the loopback interface,
-    its workers tied to this process (they are its children); yields the scheduler address."""
+    its workers tied to this process (they are its children); yields the scheduler address. The
+    scheduler's HTTP server takes a free loopback port (its default 8787 may be another cluster's:
+    distributed would warn and move, and the test suite treats warnings as errors)."""
     with distributed.LocalCluster(n_workers=int(n_workers), threads_per_worker=1, processes=True, host="127.0.0.1",
-                                  dashboard_address=None, silence_logs=logging.ERROR) as cluster, \
+                                  dashboard_address="127.0.0.1:0", silence_logs=logging.ERROR) as cluster, \
             distributed.Client(cluster, set_as_default=False) as client:
         client.register_plugin(WorkerSetup(die_with_parent=True), name="studio-worker-tied")
         yield cluster.scheduler_address

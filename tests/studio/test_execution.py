@@ -158,7 +158,7 @@ def _kill_one_busy_worker(client, killed: list, stop: threading.Event) -> None:
 def cluster():
     """A LocalCluster of 2 worker processes on 127.0.0.1 and a client of it (closed after the module)."""
     with distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True, host="127.0.0.1",
-                                  dashboard_address=None) as c, distributed.Client(c, set_as_default=False) as client:
+                                  dashboard_address="127.0.0.1:0") as c, distributed.Client(c, set_as_default=False) as client:
         yield c, client
 
 

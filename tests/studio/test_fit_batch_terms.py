@@ -1,0 +1,61 @@
+"""The loose batch's extra terms (issue 15): knees held near the single fit, the head counted as skin."""
+
+import numpy as np
+import pytest
+
+from studio.body.skeleton import POSE_SIZE, pose_slices
+from studio.cost import ClothingTarget, clothing_cost
+from studio.fit.batch import BatchOptions
+from studio.fit.batch_terms import KNEE_INDICES, KNEE_SIGMA, head_band, knee_term, with_head_skin
+
+
+def test_knee_indices_are_the_knee_hinges():
+    sl = pose_slices()
+    assert KNEE_INDICES == (sl[10].start, sl[13].start)  # lowerleg_l, lowerleg_r
+    assert sl[10].stop - sl[10].start == 1 and sl[13].stop - sl[13].start == 1
+
+
+def test_knee_term_numbers():
+    ref = np.zeros(POSE_SIZE)
+    poses = np.zeros((3, POSE_SIZE))
+    poses[1, KNEE_INDICES[0]] = KNEE_SIGMA  # one knee one sigma off
+    poses[2, list(KNEE_INDICES)] = 2 * KNEE_SIGMA  # both two sigma off
+    poses[2, 0:23] = 1.0  # other coordinates are not the term's business
+    np.testing.assert_allclose(knee_term(poses, ref, 0.05), [0.0, 0.05, 0.4])
+    np.testing.assert_allclose(knee_term(poses[1], ref, 0.0), [0.0])
+    ref[KNEE_INDICES[0]] = KNEE_SIGMA
+    np.testing.assert_allclose(knee_term(poses[1], ref, 0.05), [0.0])
+
+
+def test_head_band_takes_the_top_rows_of_the_silhouette():
+    m = np.zeros((40, 20), bool)
+    m[10:30, 5:15] = True  # 20 rows tall
+    m[12, 2] = True
+    band = head_band(m, 0.1)  # 2 rows
+    assert band.sum() == 2 * 10
+    assert band[10:12, 5:15].all() and not band[12:].any()
+    assert not head_band(m, 0.0).any() and not head_band(np.zeros((5, 5), bool), 0.5).any()
+    assert head_band(m, 1.0).sum() == m.sum()
+
+
+def test_head_skin_switches_the_head_to_full_expansion():
+    """A body mask 4 rows short of the silhouette's top: under loose settings (τ_c 4, λ_c 0.01)
+    the missing head costs ~nothing when it is clothing, the full τ-truncated distance as skin."""
+    obs = np.zeros((60, 30), bool)
+    obs[10:50, 10:20] = True
+    model = obs.copy()
+    model[10:14] = False
+    assert with_head_skin([obs], None, 0.0) is None
+    skin = with_head_skin([obs], None, 0.1)
+    assert skin[0].sum() == 4 * 10
+    plain = ClothingTarget.build([obs], None, tau=20.0, tau_cloth=4.0, cloth_weight=0.01)
+    head = ClothingTarget.build([obs], skin, tau=20.0, tau_cloth=4.0, cloth_weight=0.01)
+    c_plain, c_head = clothing_cost(plain, [model]).total, clothing_cost(head, [model]).total
+    assert c_plain == pytest.approx(0.0025) and c_head == pytest.approx(0.25)  # λ_c = 0.01 → 1
+    assert clothing_cost(head, [obs]).total == pytest.approx(0.0, abs=1e-12)
+
+
+def test_options_default_off():
+    o = BatchOptions()
+    assert o.knee_weight == 0.0 and o.head_skin == 0.0
+    assert o.to_dict()["knee_weight"] == 0.0

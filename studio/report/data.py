@@ -121,7 +121,8 @@ def gather(source, participant: Participant | None = None, *, posterior: bool = 
     if batch is not None:  # one shape shared by the batch frames (thesis ch. 6) is the body measured
         model, gender, shape = BodyModel.load(batch["gender"]), batch["gender"], np.asarray(batch["shape"], float)
         sex = participant.sex or (gender if gender in ("female", "male") else "neutral")
-        table = use_batch_shape(table, model, shape, load_truth(lay), sex=sex, frames=batch["frames"])
+        table = use_batch_shape(table, model, shape, load_truth(lay), sex=sex, frames=batch["frames"],
+                                clothing=batch.get("clothing"))
     rest = model.vertices(shape)
     measured = measure_iso(rest, model.vertices(shape, t_pose(model, shape)), model.joint_regressor @ rest,
                            model.faces, model.parts, model.face_parts)

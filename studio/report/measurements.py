@@ -135,13 +135,23 @@ def measurement_table(model, fits: dict, truth: dict | None = None, uncertainty:
     return out
 
 
+#: Measurement kinds a loose garment hides: under loose clothes the batch body is bounded only from
+#: outside there (the inside term, eq. 6.2; the skin pulls at hands and face only), so the figure is
+#: an upper bound. ``benchmarks/clothing.py --quick``: loose batch girths +75 to +171 mm, moving by up
+#: to 90 mm between runs; stature and lengths within 2 cm.
+LOOSE_BOUNDED_KINDS = ("large_girth", "small_girth", "depth", "mass", "index")
+LOOSE_BOUNDED_NAMES = ("hip_breadth",)
+
+
 def use_batch_shape(table: dict, model, shape, truth: dict | None = None, sex: str | None = None,
-                    frames: list | None = None) -> dict:
+                    frames: list | None = None, clothing: str | None = None) -> dict:
     """The table measured on the batch shape (thesis ch. 6: one shape shared by the frames,
     ``fit/batch.json``) instead of the mean of the single-frame shapes: each row's ``mean`` is the
     batch body's value (``model`` the batch's gender), its interval moved with it, the truth error
     and population recomputed; the per-frame values and their spread stay as they were (the
-    single-frame fits), ``shape_source`` says ``"batch"``. Returns a new table."""
+    single-frame fits), ``shape_source`` says ``"batch"``. With ``clothing`` ``"loose"`` (the batch's
+    clothing cost) the girths, depths, hip breadth, mass and BMI are at least ``suspect``, flagged as
+    upper bounds (:data:`LOOSE_BOUNDED_KINDS`). Returns a new table."""
     from studio.body import measure
     from studio.report.population import population_context
 
@@ -166,6 +176,9 @@ def use_batch_shape(table: dict, model, shape, truth: dict | None = None, sex: s
             row["truth_in_ci95"] = bool(row["ci95"][0] <= row["truth"] <= row["ci95"][1])
         elif same.get(name) is not None:
             row["truth"], row["error"] = float(same[name]) * scale, value - float(same[name]) * scale
+        if clothing == "loose" and (_DEF[name].kind in LOOSE_BOUNDED_KINDS or name in LOOSE_BOUNDED_NAMES):
+            row["flags"] = [*row.get("flags", []), "suspect: loose clothing hides the body here — an upper bound"]
+            row["status"] = "failed" if row.get("status") == "failed" else "suspect"
         out[name] = row
     return out
 

@@ -237,6 +237,24 @@ def test_batch_shape_moves_mean_and_interval_only():
     assert use_batch_shape(no_truth, MODEL, [0.0], sex="male")["stature"]["population"]["sex"] == "male"
 
 
+def test_loose_batch_girths_are_flagged_as_upper_bounds():
+    """Under loose clothes the batch body is bounded only from outside at the torso and limbs: its
+    girths, depths, hip breadth, mass and BMI are never printed as clean figures; heights and
+    lengths keep their status; a tight batch changes nothing; a failed row stays failed."""
+    table = measurement_table(MODEL, {0: fit(0.0), 1: fit(2.0)})
+    assert {r["status"] for r in table.values()} == {"ok"}
+    loose = use_batch_shape(table, MODEL, [4.0], clothing="loose")
+    hidden = {n for n, r in loose.items() if r["status"] == "suspect"}
+    assert hidden == {"neck_circumference", "chest_circumference", "waist_circumference", "hip_circumference",
+                      "thigh_circumference", "upper_arm_circumference", "chest_depth", "hip_breadth", "mass", "bmi"}
+    assert loose["chest_circumference"]["flags"] == ["suspect: loose clothing hides the body here — an upper bound"]
+    assert loose["stature"]["status"] == "ok" and loose["stature"]["flags"] == []
+    tight = use_batch_shape(table, MODEL, [4.0], clothing="tight")
+    assert {r["status"] for r in tight.values()} == {"ok"} and all(r["flags"] == [] for r in tight.values())
+    failed = {**table, "mass": {**table["mass"], "status": "failed", "flags": ["failed: +5.0 σ"]}}
+    assert use_batch_shape(failed, MODEL, [4.0], clothing="loose")["mass"]["status"] == "failed"
+
+
 # --------------------------------------------------------------------------- files
 HEADER = ["name", "unit", "mean", "std", "status", "flags", "truth", "error", "truth_anny", "error_anny", "clause",
           "sigma", "ci95_low", "ci95_high", "iso20685_max_error", "iso20685_ok", "percentile", "z"]

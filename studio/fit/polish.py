@@ -68,6 +68,8 @@ def contour_residuals(obj, level: int = 0, balance: float = 1.0, l1: float | Non
     import cv2
     from scipy.spatial import cKDTree
 
+    from studio.cost.chamfer import _distance_to
+
     target = obj.targets[level]
     cams = obj._level_cams[level]
     tau = float(target.tau_level)
@@ -75,7 +77,7 @@ def contour_residuals(obj, level: int = 0, balance: float = 1.0, l1: float | Non
     grads = [np.stack(np.gradient(d)[::-1], axis=-1) for d in dts]  # (H, W, 2): d/dx, d/dy
     obs, obs_rc = [], []
     for m in target.masks:
-        inner = cv2.distanceTransform(m.view(np.uint8), cv2.DIST_L2, cv2.DIST_MASK_PRECISE)
+        inner = _distance_to(~m, OBSERVED_BAND + 1, cv2.DIST_MASK_PRECISE)  # same in every process
         keep = m & (inner <= OBSERVED_BAND)
         grid = np.zeros_like(keep)
         grid[::OBSERVED_STRIDE, ::OBSERVED_STRIDE] = True

@@ -70,3 +70,25 @@ def test_tau_and_xi_limits():
 def test_distance_map_names_its_argument():
     with pytest.raises(ValueError, match=r"^mask: expected a 2-D \(H, W\) mask"):
         truncated_distance_map(np.zeros((2, 3, 3), bool), 3.0)
+
+
+def test_precise_distances_do_not_depend_on_opencv_threads():
+    """OpenCV's exact transform rounds some pixels an ulp differently with its thread count
+    (worker processes run one thread, a plain process all cores); the maps are snapped to the
+    correctly rounded sqrt of the integer squared distance, scipy's exact EDT to the bit."""
+    import cv2
+    from scipy.ndimage import distance_transform_edt
+
+    rng = np.random.default_rng(0)
+    mask = rng.random((240, 320)) < 0.002
+    before = cv2.getNumThreads()
+    try:
+        maps = []
+        for n in (4, 1):
+            cv2.setNumThreads(n)
+            maps.append(truncated_distance_map(mask, 1e4))
+    finally:
+        cv2.setNumThreads(before)
+    np.testing.assert_array_equal(maps[0], maps[1])
+    np.testing.assert_array_equal(maps[1], distance_transform_edt(~mask).astype(np.float32))
+    assert maps[1].max() > 20 and maps[1].dtype == np.float32

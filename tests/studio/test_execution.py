@@ -4,7 +4,6 @@ against a real ``dask scheduler`` and two ``dask worker`` processes on the loopb
 
 from __future__ import annotations
 
-import dataclasses
 import json
 import os
 import shutil
@@ -23,14 +22,6 @@ from studio.fit import FitError, fit_session
 
 from prockit import descendants, kill_and_time
 from test_fit_session import TINY, make_session
-
-#: Without the least-squares polish (issue 13, open): with it a frame's result depends on the
-#: process that fits it (the 4-frame session, frame 2: shape[0] −21.29011 in one process, −21.29043
-#: in a fresh worker; identical with the polish off). Not BLAS threads (same with
-#: OPENBLAS_NUM_THREADS=1) nor the meshes (batch-independent to the bit); suspected: BLAS sums
-#: inside scipy's trust region rounding with the memory alignment of its arrays, amplified by its
-#: step acceptance and the masks' pixel coverage (snapping the answer to 1e-9 did not help).
-TINY = dataclasses.replace(TINY, polish_iterations=0)
 
 distributed = pytest.importorskip("distributed", reason="Dask not installed (pip install .[dask])")
 
@@ -56,19 +47,16 @@ def _numbers(obj, path=""):
 
 
 def _assert_same(a: dict, b: dict) -> None:
-    """Same frames, same results: equal, floats to 1e-9 relative (NumPy's SIMD sums may differ
-    in the last bits between processes: measured on the walk sample, intermediate search costs
-    differed by 1e-10 while poses and shapes came out bit-identical)."""
+    """Same frames, same results, bit for bit (least-squares polish on: OpenCV's exact distance
+    transform rounded by an ulp with its thread count until :func:`studio.cost.chamfer._exact_roots`;
+    without it a worker's frame 2 came out at shape[0] −21.29043 and this process's at −21.29011)."""
     assert sorted(a) == sorted(b) == list(range(FRAMES))
     for f in a:
         for k in SAME:
             left, right = dict(_numbers(a[f][k])), dict(_numbers(b[f][k]))
             assert left.keys() == right.keys(), f"frame {f}: {k} differs in its fields"
             for leaf, v in left.items():
-                if isinstance(v, float):
-                    assert right[leaf] == pytest.approx(v, rel=1e-9, abs=1e-12), f"frame {f}: {k}{leaf}"
-                else:
-                    assert right[leaf] == v, f"frame {f}: {k}{leaf}"
+                assert right[leaf] == v, f"frame {f}: {k}{leaf}"
 
 
 @pytest.fixture(scope="module")

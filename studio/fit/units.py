@@ -45,8 +45,22 @@ RECOVERY_FACTOR = 3.0
 _CACHE: dict = {}
 
 
+#: Packages whose code decides a fit (with the body model file): part of a run's settings, so a
+#: frame fitted by other code is fitted again rather than kept.
+FIT_CODE = ("studio.fit", "studio.cost", "studio.body", "studio.optimize", "studio.render")
+
+
+def fit_code_digest() -> str:
+    """Digest of the fitting code and the body model file (:func:`studio.provenance.code_digest`)."""
+    from studio.body.model import DATA_FILE
+    from studio.provenance import code_digest
+
+    return code_digest(*FIT_CODE, files=(DATA_FILE,))
+
+
 def stored_fit(layout, frame: int, run: dict) -> dict | None:
-    """``fit/NNNNNN.json`` of ``frame`` when written by a run with the same settings, else None."""
+    """``fit/NNNNNN.json`` of ``frame`` when written by a run with the same settings (and the same
+    fitting code, ``run["code"]``), else None."""
     try:
         obj = json.loads(layout.fit_json(frame).read_text())
     except (OSError, ValueError):

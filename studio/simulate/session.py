@@ -27,8 +27,6 @@ start/end times).
 
 from __future__ import annotations
 
-import hashlib
-import importlib
 import json
 import logging
 import os
@@ -188,12 +186,9 @@ def truth_code_digest() -> str:
     """Digest of what :func:`studio_truth`'s figures depend on besides the body file: the source
     of the measurement modules and the shipped body model file."""
     from studio.body.model import DATA_FILE
+    from studio.provenance import code_digest
 
-    h = hashlib.sha256()
-    for name in _TRUTH_MODULES:
-        h.update(Path(importlib.import_module(name).__file__).read_bytes())
-    h.update(DATA_FILE.read_bytes() if DATA_FILE.is_file() else b"")
-    return h.hexdigest()[:16]
+    return code_digest(*_TRUTH_MODULES, files=(DATA_FILE,))
 
 
 def _truth_measurements(extra: dict) -> dict:

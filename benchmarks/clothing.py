@@ -10,7 +10,8 @@ silhouettes (``studio fit``'s single-frame fit, gender auto on the first frame),
 (``studio.fit.batch_session.fit_batch_session``: clothing cost of the condition, gender by batch)
 over the frames the quality gates pass; single-pose figures are over the same frames.
 
-Per subject × condition (cached as JSON: a rerun only does what is missing):
+Per subject × condition (cached as JSON with the fitting code's digest: a rerun does what is missing or was
+done by other fitting code):
 
 - stature, chest, waist and hip girth errors of the batch shape and of each single-pose fit
   against the true body measured by the same definitions, and the mean surface distance of the
@@ -231,8 +232,11 @@ def run_one(p: dict, condition: str, workers: int) -> dict:
 
 def run(args) -> int:
     root = bench_root()
+    from studio.fit.units import fit_code_digest
+
     results = root / "results"
     results.mkdir(parents=True, exist_ok=True)
+    code = fit_code_digest()
     for p in subjects(args.subjects, args.poses, args.quick):
         if not (root / p["name"] / "body.npz").is_file():
             print(f"{p['name']}: no truth body — run `build` first with torch + anny", file=sys.stderr)
@@ -242,11 +246,12 @@ def run(args) -> int:
             return 1
         for cond in args.conditions:
             path = results / f"{p['name']}_{cond}.json"
-            if path.is_file():
-                continue
+            if path.is_file() and json.loads(path.read_text()).get("code") == code:
+                continue  # done by this fitting code (results of other code are redone, as its fits are)
             t = time.perf_counter()
             r = run_one(p, cond, args.workers)
             r["time_total_s"] = time.perf_counter() - t
+            r["code"] = code
             from rigs.atomic import atomic_write_json
 
             atomic_write_json(path, r)

@@ -30,7 +30,8 @@ Splits (``--split``): ``held-out`` (the default, seeds from 1000, only ever meas
 reported) and ``dev`` (other people, seeds from 100, in their own folder: the set any setting is
 tuned on). Nothing is ever tuned on the held-out split.
 
-Steps (resumable: every fitted frame is cached as JSON, a rerun fits only what is missing):
+Steps (resumable: every fitted frame is cached as JSON with the fitting code's digest, a rerun fits only
+what is missing, and refuses to add frames to a variant fitted by other code — a variant holds one code's figures):
 
     /path/to/python-with-anny benchmarks/pose_accuracy.py build --people 30   # torch + anny
     .venv/bin/python benchmarks/pose_accuracy.py run --variant full --workers 2
@@ -181,6 +182,7 @@ def run(args) -> int:
     person is rendered."""
     from rigs.atomic import atomic_write_json, atomic_write_text
     from studio.segment import segment_session
+    from studio.fit.units import fit_code_digest
     from studio.simulate import ensure_rendered
     from studio.workers import worker_pool
 
@@ -192,10 +194,17 @@ def run(args) -> int:
         if not (root / p["name"] / "body.npz").is_file():
             print(f"{p['name']}: no truth body — run `build` first with torch + anny", file=sys.stderr)
             return 1
+    code = fit_code_digest()
+    other = sorted({str(r.get("code")) for r in _rows(args.variant, args.split)} - {code})
+    if other and any(not (out / f"{p['name']}_{f}.json").is_file() for p in everyone for f in range(len(p["poses"]))
+                     if not args.families or p["poses"][f] in args.families):
+        print(f"variant {args.variant}: its frames were fitted by other fitting code (digest {', '.join(other)}; "
+              f"this code {code}): a variant holds one code's figures — give a new --variant name", file=sys.stderr)
+        return 1
     t0, n = time.perf_counter(), 0
 
     def save(fut):
-        r = fut.result()
+        r = {**fut.result(), "code": code}
         atomic_write_json(out / f"{r['person']}_{r['frame']}.json", r)
         print(f"{r['person']} frame {r['frame']} ({r['family']}): {r.get('surface_mm', float('nan')):.1f} mm, "
               f"{r['status']}, {time.perf_counter() - t0:.0f} s", flush=True)
@@ -264,7 +273,8 @@ def table(args) -> int:
             "joint_median_mm", "precision", "recall", "time_s", "ok_share")
     short = ("n", "surf med", "surf p90", "surf max", "stat med", "joint med", "prec", "rec", "s/frame", "ok")
     for variant, summary in results.items():
-        print(f"\n== variant {variant}")
+        codes = sorted({str(r.get("code", "not recorded")) for r in _rows(variant, args.split)})
+        print(f"\n== variant {variant} (fitting code {', '.join(codes)})")
         print(f"{'family':15s} " + " ".join(f"{c:>9s}" for c in short))
         for fam, r in summary.items():
             print(f"{fam:15s} " + " ".join(f"{r[c]:9.0f}" if c == "frames" else f"{r[c]:9.3f}"

@@ -57,13 +57,12 @@ def measurement_lines(table: dict) -> list[str]:
 
 
 def main(argv=None) -> int:
-    from rigs.imageio import read_image
     from studio.body import BodyModel
     from studio.cli.commands.fit import QUICK
     from studio.fit import FitOptions, fit_frame, fit_session, load_fits
     from studio.workspace import Workspace
     from studio.workspace.frames import select_frames
-    from studio.fit.evaluate import joint_error, silhouette_agreement, surface_distance, true_mesh
+    from studio.fit.evaluate import joint_error, silhouette_agreement, surface_distance, true_mesh, true_person_masks
     from studio.render import silhouette
     from studio.report.measurements import load_truth, measurement_table
     from studio.segment import segment_session
@@ -95,7 +94,7 @@ def main(argv=None) -> int:
     for f, fit in fits.items():
         V = model.vertices(fit.shape, fit.pose)
         Vt = true_mesh(session, f)
-        truth_masks = [read_image(ws.layout.truth_labels(c.name, f)) == 1 for c in cameras]
+        truth_masks = true_person_masks(session, f, cameras)
         model_masks = [silhouette(c, V, model.faces) for c in cameras]
         prec, rec = silhouette_agreement(model_masks, truth_masks)
         rows.append({

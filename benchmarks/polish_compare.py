@@ -39,10 +39,9 @@ METHODS = ("start", "nm-final", "nm-all", "nm-restart", "block", "lsq", "lsq+nm"
 
 
 def _setup(session: Path, frame: int, start: dict):
-    from rigs.imageio import read_image
     from studio.body import BodyModel
     from studio.body.skeleton import POSE_SIZE
-    from studio.fit.evaluate import true_mesh
+    from studio.fit.evaluate import true_mesh, true_person_masks
     from studio.fit.objective import pose_bounds
     from studio.fit.props import find_support
     from studio.report.measurements import load_truth
@@ -62,7 +61,7 @@ def _setup(session: Path, frame: int, start: dict):
     step = np.concatenate([np.full(POSE_SIZE, 0.04), 0.25 * sig])
     step[:3] = 0.015
     truth = {"mesh": true_mesh(ws.path, frame),
-             "labels": [read_image(ws.layout.truth_labels(c.name, frame)) == 1 for c in ws.cameras]}
+             "labels": true_person_masks(ws.path, frame, ws.cameras)}
     return ws, model, obj, np.clip(obj.pack(shape, pose), *bounds), bounds, step, truth
 
 

@@ -142,11 +142,10 @@ def build(args) -> int:
 
 def _fit_one(job: dict) -> dict:
     """Worker: fit one frame alone and measure it against the truth."""
-    from rigs.imageio import read_image
     from studio.body import BodyModel, measure
     from studio.fit import FitOptions, fit_frame
     from studio.fit.errors import UnusableFrame
-    from studio.fit.evaluate import joint_error, silhouette_agreement, surface_distance, true_mesh
+    from studio.fit.evaluate import joint_error, silhouette_agreement, surface_distance, true_mesh, true_person_masks
     from studio.render import silhouette
     from studio.report.measurements import load_truth
     from studio.workspace import Workspace
@@ -164,7 +163,7 @@ def _fit_one(job: dict) -> dict:
     dt = time.perf_counter() - t
     V = model.vertices(fit.shape, fit.pose)
     Vt = true_mesh(ws.path, f)
-    truth_masks = [read_image(ws.layout.truth_labels(c.name, f)) == 1 for c in ws.cameras]
+    truth_masks = true_person_masks(ws.path, f, ws.cameras)
     prec, rec = silhouette_agreement([silhouette(c, V, model.faces) for c in ws.cameras], truth_masks)
     stature = measure(model, fit.shape)["stature"]
     return {**job["key"], "status": fit.status, "reasons": fit.quality["reasons"],

@@ -141,9 +141,8 @@ def polish(obj, shape: np.ndarray, pose: np.ndarray, evaluations: int = 900) -> 
 
 
 def measure_frame(session: Path, frame: int, start: dict | None, ks: tuple[int, ...]) -> dict:
-    from rigs.imageio import read_image
     from studio.body import BodyModel, measure
-    from studio.fit.evaluate import silhouette_agreement, surface_distance, true_mesh
+    from studio.fit.evaluate import silhouette_agreement, surface_distance, true_mesh, true_person_masks
     from studio.fit.props import find_support
     from studio.render import silhouette
     from studio.report.measurements import load_truth
@@ -153,8 +152,7 @@ def measure_frame(session: Path, frame: int, start: dict | None, ks: tuple[int, 
     truth = load_truth(ws.layout)
     model = BodyModel.load(truth["sex"])
     Vt = true_mesh(ws.path, frame)
-    labels = [read_image(ws.layout.truth_labels(c.name, frame)) for c in ws.cameras]
-    tm = [lab == 1 for lab in labels]
+    tm = true_person_masks(ws.path, frame, ws.cameras)
     out = {"frame": frame}
     with np.load(ws.layout.truth_body(frame)) as z:
         anny = z["vertices"].astype(np.float64)

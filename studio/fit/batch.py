@@ -260,8 +260,8 @@ class _Batch:
     def __init__(self, model: BodyModel, frames: list[BatchFrame], options: BatchOptions):
         self.model, self.frames, self.options = model, frames, options
         self.targets = [clothing_targets(f, options) for f in frames]
-        self.objs = [ClothedObjective(model, f.cameras, t, model.mean_shape(), 0, options.prior_weight,
-                                      floor=options.stands) for f, t in zip(frames, self.targets, strict=True)]
+        self.objs = [ClothedObjective(model, f.cameras, t, model.mean_shape(), 0, options.prior_weight)
+                     for f, t in zip(frames, self.targets, strict=True)]  # (meshes stood on the floor in per_frame)
         self.sigma = np.sqrt(np.asarray(model.eigenvalues, dtype=np.float64))
         self.n_evaluations = 0
 

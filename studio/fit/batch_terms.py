@@ -13,10 +13,12 @@ from __future__ import annotations
 
 import numpy as np
 
+from studio.body.skeleton import PART_NAMES, pose_slices
+
 __all__ = ["KNEE_INDICES", "KNEE_SIGMA", "head_band", "knee_term", "with_head_skin"]
 
-#: pose-vector indices of the knee hinges (lowerleg_l, lowerleg_r: studio.body.skeleton.pose_slices)
-KNEE_INDICES = (23, 28)
+#: pose-vector indices of the knee hinges (the lower legs' joint angles)
+KNEE_INDICES = tuple(pose_slices()[PART_NAMES.index(p)].start for p in ("lowerleg_l", "lowerleg_r"))
 #: scale of the knee term (rad): a deviation of this much from the single fit costs ``weight``
 KNEE_SIGMA = float(np.radians(10.0))
 

@@ -16,7 +16,8 @@ import numpy as np
 
 from studio.fit.errors import FitError
 
-__all__ = ["joint_error", "silhouette_agreement", "surface_distance", "surface_samples", "true_mesh"]
+__all__ = ["joint_error", "silhouette_agreement", "surface_distance", "surface_samples", "true_mesh",
+           "true_person_masks"]
 
 
 def true_mesh(session_path, frame: int) -> np.ndarray:
@@ -33,6 +34,16 @@ def true_mesh(session_path, frame: int) -> np.ndarray:
     if anny.shape[0] != A.shape[1]:
         raise FitError(f"{p}: {anny.shape[0]} vertices, the Anny correspondence expects {A.shape[1]}")
     return np.asarray(A @ anny)
+
+
+def true_person_masks(session_path, frame: int, cameras) -> list[np.ndarray]:
+    """The simulator's true person pixels (label 1 of ``truth/labels``) of ``frame``, (H, W) bool
+    per camera of ``cameras`` (objects with a ``name``), in that order."""
+    from rigs.imageio import read_image
+    from studio.workspace import Layout
+
+    lay = Layout(session_path)
+    return [read_image(lay.truth_labels(c.name, frame)) == 1 for c in cameras]
 
 
 def surface_samples(vertices: np.ndarray, faces: np.ndarray, n: int, rng) -> np.ndarray:

@@ -11,6 +11,7 @@ from calibration import RigCalibration
 from meshkit import uv_sphere
 from rigs.imageio import read_image
 from rigs.session import Session
+from studio.fit.evaluate import true_person_masks
 from studio.render import shadow_mask, silhouette
 from studio.simulate import SpecError, apply_sensor, ensure_rendered, load_spec, simulate
 from studio.simulate.scene import Scene
@@ -96,6 +97,7 @@ def test_truth_masks_match_images_and_geometry(rendered):
             # labels are the silhouettes of the true geometry in the saved calibration
             person = silhouette(cam, V, scene.body.faces)
             assert np.array_equal(lab == 1, person)
+            assert np.array_equal(true_person_masks(out, i, [cam])[0], person)  # what the benchmarks score against
             shadow = shadow_mask(cam, V, scene.body.faces, scene.lights[0]) & ~person
             assert np.array_equal(lab == 2, shadow & (lab != 0))
             assert (lab == 2).sum() > 50 and person.sum() > 100

@@ -58,9 +58,9 @@ FIRST_SEED = 1000  # held-out people: seeds from here up are only ever measured
 SPLITS = {"held-out": FIRST_SEED, "dev": 100}  # first seed of each split's people
 VARIANTS = {"full": {}, "no-library": {"start": "stride"}, "no-rival": {"rival_heading": False},
             "no-limb": {"limb_particles": 0}, "no-support": {"find_support": False},
-            "retry": {"retries": 1}, "arm-states": {}, "distal-nm": {},
+            "retry": {"retries": 1}, "twin-retry": {}, "arm-states": {}, "distal-nm": {},
             "stature-distal": {"stature_steps": (-0.06, -0.045, -0.03, -0.015, 0.0, 0.015, 0.03, 0.045, 0.06)},
-            "distal": {}, "lsq-polish": {}}
+            "distal": {}, "lsq-polish": {}, "dev-c0": {}, "dev-sp05": {"polish_shape_prior": (0.05, 2.0)}, "dev-sp20": {"polish_shape_prior": (0.2, 2.0)}, "dev-retry": {"retries": 1}, "dev-twin": {"frontal_twin": True}, "dev-twin-sp": {"frontal_twin": True, "polish_shape_prior": (0.05, 2.0)}, "dev-twin-sp-retry": {"frontal_twin": True, "polish_shape_prior": (0.05, 2.0), "retries": 1}}
 STANDING = ("a_pose", "t_pose", "arms_overhead", "hands_on_hips", "arm_forward", "arms_crossed", "wide_stance",
             "torso_twist")
 

@@ -56,7 +56,7 @@ from studio.body.skeleton import POSE_SIZE
 from studio.cost import SilhouetteTarget
 from studio.fit.errors import FitError, UnusableFrame
 from studio.fit.init import hull_centroid, hull_height, initial_poses, stature_search, stature_shape
-from studio.fit.library import library_match, stand_on_floor
+from studio.fit.library import frontal_twin, library_match, stand_on_floor
 from studio.fit.objective import CylinderObjective, FrameObjective, pose_bounds
 from studio.fit.options import FitOptions
 from studio.fit.polish import lsq_polish
@@ -386,12 +386,24 @@ def fit_frame(
                                    extra=_arm_states(model, limbs) if previous_pose is None else None)
     timings["nelder_mead"] = time.perf_counter() - t
     t = time.perf_counter()
-    polish = None
+    polish = twin_costs = None
     if options.polish_iterations:
         # trust-region least squares on a smooth stand-in of the cost, every parameter at once at
         # full resolution (Nelder–Mead over ~40 parameters stalls short of the cost's minimum);
         # its best iterate by the cost itself is kept
-        x_nm, _, polish = lsq_polish(obj, x_nm, (blo, bhi), step, level=final, max_nfev=options.polish_iterations)
+        x_nm, c_nm, polish = lsq_polish(obj, x_nm, (blo, bhi), step, level=final, max_nfev=options.polish_iterations,
+                                        shape_prior=options.polish_shape_prior)
+        if options.frontal_twin and previous_pose is None:
+            # the front/back twin of the answer (reflected through its frontal plane) polished
+            # too; the lower cost is kept: a body facing the wrong way explains the silhouettes
+            # nearly as well, and no local search turns it round
+            s_nm, p_nm = obj.split(x_nm[None])
+            twin = obj.pack(s_nm[0], frontal_twin(model, s_nm[0], model.clip_pose(p_nm[0])))
+            x_tw, c_tw, _ = lsq_polish(obj, np.clip(twin, blo, bhi), (blo, bhi), step, level=final,
+                                       max_nfev=options.polish_iterations, shape_prior=options.polish_shape_prior)
+            twin_costs = [c_nm, c_tw]
+            if c_tw < c_nm:
+                x_nm = x_tw
     timings["polish"] = time.perf_counter() - t
     t = time.perf_counter()
     last = [Stage(tuple(range(6)) + tuple(shape_idx) + tuple(i for g in _part_groups()[:1] for i in g),
@@ -416,6 +428,8 @@ def fit_frame(
     if rival_cost is not None:
         costs["search_rival_heading"] = rival_cost
     costs["nelder_mead_refine"] = float(nm.cost)
+    if twin_costs is not None:
+        costs["frontal_twin"] = twin_costs  # the polished answer's cost and its front/back twin's
     if polish is not None:
         costs["polish"] = [polish["cost_before"], min([polish["cost_before"], *polish["costs"]])]
     if start_family is not None:

@@ -97,6 +97,27 @@ def _mirror(pose: np.ndarray) -> np.ndarray:
     return out
 
 
+def frontal_twin(model, shape: np.ndarray, pose: np.ndarray) -> np.ndarray:
+    """The pose of the body ``model(shape, pose)`` reflected through its own frontal plane (the
+    vertical plane through its pelvis across its facing direction): facing the other way with
+    the sides swapped (:func:`_mirror`), so each limb fills nearly the same place seen from the
+    front or back — the front/back ambiguity of silhouettes that a search can settle on the
+    wrong side of. The pelvis stays where it was."""
+    from calibration.rotation import matrix_to_rotvec, rotvec_to_matrix
+
+    pose = np.asarray(pose, dtype=np.float64)
+    R = rotvec_to_matrix(pose[3:6])
+    f = R @ [0.0, -1.0, 0.0]  # the facing direction, the plane's normal
+    a = 2.0 * np.arctan2(f[1], f[0])
+    M = np.diag([-1.0, 1.0, 1.0])
+    S = np.array([[np.cos(a), -np.sin(a), 0.0], [np.sin(a), np.cos(a), 0.0], [0.0, 0.0, 1.0]]) @ M  # eq.: Rz(2α)·M
+    twin = _mirror(pose)
+    twin[:3] = pose[:3]
+    twin[3:6] = matrix_to_rotvec(S @ R @ M)
+    twin[:2] += (model.joints(shape, pose)[0] - model.joints(shape, twin)[0])[:2]
+    return twin
+
+
 def pose_library(model, *, variants: int = 6, jitter: float = 0.15, seed: int = 0) -> tuple[np.ndarray, list[str]]:
     """Library poses (N, POSE_SIZE) and their family names (N,): every family, its mirror
     image, and ``variants`` - 1 jittered copies of each (Gaussian ``jitter`` rad on every joint

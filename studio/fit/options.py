@@ -79,6 +79,20 @@ class FitOptions:
     Held out (120 frames, once, variant ``lsq-polish``): 119 frames closer and at a lower cost,
     median surface 9.6 → 6.3 mm, p90 17.3 → 12.2, P/R 0.935/0.945 → 0.961/0.962, ``ok`` 67 → 83 %,
     CPU 12.6 → 11.0 s per frame (mean).
+    ``polish_shape_prior``: (weight, threshold σ) of a shape-prior stand-in in the polish's
+    residuals (:func:`studio.fit.polish.shape_residuals`, eq. 6.8 with the threshold lowered;
+    weight 0 turns it off). The least squares drove shape coefficients onto the ±3 σ bounds to
+    make up for pose errors (held out: 14 of 120 frames at a bound, each flagged by the shape
+    gate, 6 of them closer than 10 mm). Dev people (64 frames, 16 people, side by side): (0.05, 2)
+    frames at a bound 2 → 0, median surface 6.73 → 6.75 mm, mean 8.38 → 8.36, p90 13.8 → 13.5;
+    (0.2, 2) the same within 0.1 mm, so the weaker one.
+    ``frontal_twin``: a frame fitted from its silhouettes also polishes the front/back twin of the
+    polished answer (:func:`studio.fit.library.frontal_twin`: reflected through its own frontal
+    plane, facing the other way, sides swapped) and keeps the lower cost: a body fitted facing
+    the wrong way (a T-pose or hands on hips: every limb in the frontal plane) explains the
+    silhouettes nearly as well, and no local search turns it round. Dev (64 frames, with the
+    shape prior above): a hands-on-hips frame fitted backwards (joints 441 mm off) 22.7 → 6.7 mm,
+    a T-pose 18.5 → 16.3 mm; the 62 others unchanged; mean surface 8.36 → 8.08 mm, ~1.5 s CPU.
     ``stature_steps``: relative stature changes searched around the library's stature with its
     best start (:func:`studio.fit.init.stature_search`, e.g. its ``STATURE_STEPS``); off by
     default. On the dev people (28 frames, with the distal stage and the library without mirror
@@ -88,10 +102,14 @@ class FitOptions:
     ``retries``: a frame of several views fitted from its silhouettes whose body explains them
     poorly (the agreement gates) is searched again up to this many times, with other random
     draws and from the library's postures other than those the last attempt started from; the
-    lowest total cost is kept (one view: ``studio.fit.frame.MONOCULAR_RETRIES``). Off by default:
-    on the dev people (24 frames, 4 flagged) one retry kept the first attempt on 3 flagged frames
-    and on the 4th reached a lower cost but a worse body (half squat 34.4 → 37.3 mm), for twice
-    the CPU on every flagged frame.
+    lowest total cost is kept (one view: ``studio.fit.frame.MONOCULAR_RETRIES``). Before the
+    least-squares polish, on the dev people (24 frames, 4 flagged) one retry kept the first
+    attempt on 3 flagged frames and on the 4th reached a lower cost but a worse body (half squat
+    34.4 → 37.3 mm). With the polish (each attempt ends nearer its own minimum, so their costs
+    compare fairly) one retry is on: dev, 64 frames with the shape prior and the front/back twin,
+    5 flagged: an arm forward started as arms crossed 17.5 → 5.1 mm, a T-pose 16.3 → 9.8 mm, a
+    half squat 33.4 → 30.8 mm; `ok` 92.2 → 95.3 %, mean surface 8.08 → 7.74 mm, p90 12.4 → 11.5;
+    a flagged frame takes twice the time (mean 12.3 → 14.2 s per frame, two at once).
 
     Frames fitted alone from the silhouettes (walk, frames 0/6/12/18/21): with the cone search,
     stride postures and the limb re-search the joint error was 17/13/29/29/21 mm; SCAPE search
@@ -110,6 +128,8 @@ class FitOptions:
     final_evaluations: int = 500
     distal_share: float = 0.0
     polish_iterations: int = 15
+    polish_shape_prior: tuple[float, float] = (0.05, 2.0)
+    frontal_twin: bool = True
     stature_steps: tuple[float, ...] = ()
     partition_particles: int = 40
     tracking_budget: float = 0.5
@@ -123,7 +143,7 @@ class FitOptions:
     search_model: str = "cylinder"
     start: str = "library"
     find_support: bool = True
-    retries: int = 0
+    retries: int = 1
 
     def __post_init__(self):
         if self.search_model not in ("scape", "cylinder"):

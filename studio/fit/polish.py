@@ -26,7 +26,7 @@ import numpy as np
 
 from studio.blas import one_blas_thread
 
-__all__ = ["contour_residuals", "lsq_polish"]
+__all__ = ["contour_residuals", "lsq_polish", "shape_residuals"]
 
 #: Observed pixels within this many pixels of the observed outline (inside) enter the
 #: observed → model direction, every ``OBSERVED_STRIDE``-th row and column.
@@ -58,6 +58,25 @@ def _root(d: np.ndarray, smooth: float | None) -> tuple[np.ndarray, np.ndarray]:
         return d, np.ones_like(d)
     s = np.sqrt(d + smooth)
     return d / s, (d + 2 * smooth) / (2 * s**3)
+
+
+def shape_residuals(obj, weight: float, threshold: float):
+    """(residuals, jacobian) of the shape prior's stand-in in the polish: per free shape coefficient
+    ``√weight · max(0, |β|/σ − threshold)`` (eq. 6.8 with its threshold lowered: the least squares
+    otherwise drive coefficients to the ±3 σ bounds to make up for pose errors)."""
+    sigma = obj._sigma[: obj.n_shape_free]
+    root = np.sqrt(weight)
+
+    def residuals(x):
+        return root * np.maximum(0.0, np.abs(np.asarray(x, float)[-len(sigma):]) / sigma - threshold)
+
+    def jacobian(x):
+        beta = np.asarray(x, float)[-len(sigma):]
+        J = np.zeros((len(sigma), len(x)))
+        J[:, -len(sigma):] = np.diag(root * np.sign(beta) / sigma * (np.abs(beta) / sigma > threshold))
+        return J
+
+    return residuals, jacobian
 
 
 def contour_residuals(obj, level: int = 0, balance: float = 1.0, l1: float | None = 1.0):
@@ -139,23 +158,32 @@ def contour_residuals(obj, level: int = 0, balance: float = 1.0, l1: float | Non
 
 @one_blas_thread  # the trust region's SVD of a ~18000 × 40 Jacobian: 0.06 s on one thread, 0.2–0.5 s on two
 def lsq_polish(obj, x0, bounds, scale, *, level: int = 0, max_nfev: int = 12, balance: float = 1.0,
-               l1: float | None = 1.0) -> tuple[np.ndarray, float, dict]:
+               l1: float | None = 1.0, shape_prior: tuple[float, float] | None = None) -> tuple[np.ndarray, float, dict]:
     """Trust-region least squares (``trf``, at most ``max_nfev`` iterations) on
     :func:`contour_residuals` from ``x0`` within ``bounds`` = (lo, hi), ``x_scale=scale`` (D,)
     (the parameters' typical steps; the Jacobian's step is ``FD_STEP`` of them). Returns the
     iterate with the lowest cost by ``obj`` (eq. 4.6 with its priors; ``x0`` when none is lower),
     that cost, and a record: ``cost_before``, ``costs`` (every iterate's), ``nfev``, ``njev``.
     ``l1``: the smoothing of :func:`_root` (None: squared distances); ``balance``: the weight of
-    the observed → model direction."""
+    the observed → model direction; ``shape_prior``: (weight, threshold σ) of
+    :func:`shape_residuals` appended to the residuals (None: none)."""
     from scipy.optimize import least_squares
 
     lo, hi = (np.asarray(b, float) for b in bounds)
     x0 = np.clip(np.asarray(x0, float), lo, hi)
     res, jac = contour_residuals(obj, level, balance, l1)
     h = FD_STEP * np.asarray(scale, float)
+    if shape_prior is not None and shape_prior[0] > 0 and obj.n_shape_free:
+        sres, sjac = shape_residuals(obj, *shape_prior)
+    else:
+        sres = sjac = None
+
+    def R(x):
+        return res(x) if sres is None else np.concatenate([res(x), sres(x)])
 
     def J(x):
-        return jac(x, np.where(x + h > hi, -h, h))  # a forward step that stays inside the bounds
+        j = jac(x, np.where(x + h > hi, -h, h))  # a forward step that stays inside the bounds
+        return j if sjac is None else np.vstack([j, sjac(x)])
 
     best = {"x": x0, "cost": float(obj(x0[None], level)[0])}
     start_cost, costs = best["cost"], []
@@ -166,7 +194,7 @@ def lsq_polish(obj, x0, bounds, scale, *, level: int = 0, max_nfev: int = 12, ba
         if c < best["cost"]:
             best.update(x=intermediate_result.x.copy(), cost=c)
 
-    r = least_squares(res, x0, jac=J, bounds=(lo, hi), x_scale=np.asarray(scale, float), max_nfev=max_nfev,
+    r = least_squares(R, x0, jac=J, bounds=(lo, hi), x_scale=np.asarray(scale, float), max_nfev=max_nfev,
                       method="trf", xtol=1e-6, ftol=1e-6, callback=keep_best)
     return best["x"], best["cost"], {"cost_before": start_cost, "costs": costs, "nfev": int(r.nfev),
                                      "njev": int(r.njev or 0)}

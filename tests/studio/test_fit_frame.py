@@ -102,8 +102,8 @@ def test_a_fit_of_several_views_explaining_them_poorly_is_searched_again_from_ot
     model, cams, shape, pose, V, masks = scene
     tiny = FitOptions(levels=(2, 2, 2), n_particles=8, n_layers=1, nm_evaluations=4, final_evaluations=4,
                       n_shape_free=0, partition_particles=0, partition_layers=0, limb_particles=0,
-                      rival_heading=False, find_support=False)
-    assert tiny.retries == 0  # off by default
+                      rival_heading=False, find_support=False, retries=0)
+    assert FitOptions().retries == 1  # on by default
     once = fit_frame(model, cams, masks, options=tiny, seed=3)
     assert _explains_poorly(once.quality) and "attempt_costs" not in once.costs
     first = once.costs["start_family"]

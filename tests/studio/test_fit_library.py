@@ -6,7 +6,7 @@ import pytest
 
 from studio.body import BodyModel
 from studio.fit import FitError, FitOptions
-from studio.fit.library import FAMILIES, _mirror, family_pose, library_match, pose_library, stand_on_floor
+from studio.fit.library import FAMILIES, _mirror, family_pose, frontal_twin, library_match, pose_library, stand_on_floor
 from studio.render import silhouette
 
 from test_fit_frame import ring_cameras
@@ -199,3 +199,29 @@ def test_stature_search_recovers_a_squat_stature(model):
     assert abs(height - 1.80) <= 0.016 * 1.80
     np.testing.assert_allclose(found, stature_shape(model, height))
     assert abs(start - 1.80) > 0.1  # the start itself was 10 cm off
+
+
+@pytest.mark.parametrize("family", ["a_pose", "walk", "arms_crossed"])
+def test_frontal_twin_is_the_body_reflected_through_its_frontal_plane(model, family):
+    """The front/back twin (turned, sides swapped) is the mirror image of the body through the
+    vertical plane across its facing direction at its pelvis: the mean shape posed and tilted
+    off the axes, every vertex within 7 mm of the reflected body (mean ≤ 2 mm: A-pose 0.1, walk
+    1.5, arms crossed 1.1), the pelvis where it was, the twin's twin the pose itself."""
+    from scipy.spatial import cKDTree
+
+    from calibration.rotation import rotvec_to_matrix
+
+    shape = np.zeros(len(model.eigenvalues))
+    pose = family_pose(model, family).copy()
+    pose[:2] = [0.3, -0.2]
+    pose[3:6] = [0.05, -0.02, 1.0]
+    twin = frontal_twin(model, shape, pose)
+    V, Vt = model.vertices(shape, pose), model.vertices(shape, twin)
+    pelvis = model.joints(shape, pose)[0]
+    f = rotvec_to_matrix(pose[3:6]) @ [0.0, -1.0, 0.0]
+    n = np.array([f[0], f[1], 0.0]) / np.hypot(f[0], f[1])
+    d = cKDTree(Vt).query(V - 2 * ((V - pelvis) @ n)[:, None] * n)[0]
+    assert d.mean() < 0.002 and d.max() < 0.007
+    assert np.abs(V - Vt).max() > 0.1  # a different body, not the pose itself
+    np.testing.assert_allclose(model.joints(shape, twin)[0], pelvis, atol=1e-5)
+    np.testing.assert_allclose(frontal_twin(model, shape, twin), pose, atol=1e-9)

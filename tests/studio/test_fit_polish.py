@@ -85,3 +85,27 @@ def test_polish_lowers_the_cost_and_recovers_the_pose(frame):
     assert joints_off(x0) > 0.035 and joints_off(x) < 0.015
     assert np.all(x >= bounds[0]) and np.all(x <= bounds[1])
     assert nm.cost > 2 * c and joints_off(nm.x) > joints_off(x)
+
+
+def test_the_shape_prior_rows_are_zero_inside_the_threshold_and_pull_back_beyond_it(frame):
+    """The polish's shape-prior rows (eq. 6.8 with a lower threshold): 0 within ``threshold`` σ on
+    every free coefficient, √w·(|β|/σ − threshold) beyond, and their Jacobian the exact slope."""
+    from studio.fit.polish import shape_residuals
+
+    model, obj, shape, pose, x0, bounds, step = frame
+    sig = np.sqrt(model.eigenvalues[:3])
+    res, jac = shape_residuals(obj, 0.25, 2.0)
+    x = x0.copy()
+    x[-3:] = [1.5, -1.9, 0.0] * sig
+    assert np.all(res(x) == 0) and np.all(jac(x) == 0)
+    x[-3:] = [2.5, -3.0, 0.0] * sig
+    np.testing.assert_allclose(res(x), [0.25, 0.5, 0.0])  # √0.25 × (2.5 − 2), √0.25 × (3 − 2)
+    J = jac(x)
+    assert J.shape == (3, obj.size) and np.all(J[:, :-3] == 0)
+    np.testing.assert_allclose(np.diag(J[:, -3:]), [0.5 / sig[0], -0.5 / sig[1], 0.0])
+    # the polish from a start with the first coefficient at the 3 σ bound: the prior brings it in
+    x_start = x0.copy()
+    x_start[-3] = 3 * sig[0]
+    free, _, _ = lsq_polish(obj, x_start, bounds, step, max_nfev=15)
+    pulled, _, _ = lsq_polish(obj, x_start, bounds, step, max_nfev=15, shape_prior=(1.0, 0.5))
+    assert abs(pulled[-3]) < abs(free[-3])

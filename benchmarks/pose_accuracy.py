@@ -23,7 +23,12 @@ dev experiments of that study: ``distal`` (with a library without mirror twins) 
 ``stature-distal`` (that, and the library's stature searched finely, ``FitOptions.stature_steps``);
 ``lsq-polish`` (the default options of the code that polishes every parameter by least squares
 before a shorter final stage, ``FitOptions.polish_iterations``, the distal stage off: issue 13,
-``benchmarks/polish_compare.py``). ``--families`` fits only the frames
+``benchmarks/polish_compare.py``); ``twin-retry`` (the default options of the code that holds the
+polish's shape off its bounds, polishes the front/back twin and retries a flagged frame once).
+Dev experiments of that step (16 dev people, 64 frames): ``dev-c0`` (the ``lsq-polish`` code),
+``dev-sp05`` / ``dev-sp20`` (``FitOptions.polish_shape_prior`` of weight 0.05 / 0.2),
+``dev-retry`` (one retry), ``dev-twin-sp`` (``FitOptions.frontal_twin`` and the weaker prior),
+``dev-twin-sp-retry`` (all three). ``--families`` fits only the frames
 of the named posture families (e.g. ``--families seated`` for ``no-support``).
 
 Splits (``--split``): ``held-out`` (the default, seeds from 1000, only ever measured: the figures
@@ -60,7 +65,14 @@ VARIANTS = {"full": {}, "no-library": {"start": "stride"}, "no-rival": {"rival_h
             "no-limb": {"limb_particles": 0}, "no-support": {"find_support": False},
             "retry": {"retries": 1}, "twin-retry": {}, "arm-states": {}, "distal-nm": {},
             "stature-distal": {"stature_steps": (-0.06, -0.045, -0.03, -0.015, 0.0, 0.015, 0.03, 0.045, 0.06)},
-            "distal": {}, "lsq-polish": {}, "dev-c0": {}, "dev-sp05": {"polish_shape_prior": (0.05, 2.0)}, "dev-sp20": {"polish_shape_prior": (0.2, 2.0)}, "dev-retry": {"retries": 1}, "dev-twin": {"frontal_twin": True}, "dev-twin-sp": {"frontal_twin": True, "polish_shape_prior": (0.05, 2.0)}, "dev-twin-sp-retry": {"frontal_twin": True, "polish_shape_prior": (0.05, 2.0), "retries": 1}}
+            "distal": {}, "lsq-polish": {},
+            # dev experiments; each names its options, so it stays what it was under later defaults
+            "dev-c0": {"polish_shape_prior": (0.0, 2.0), "frontal_twin": False, "retries": 0},
+            "dev-sp05": {"polish_shape_prior": (0.05, 2.0), "frontal_twin": False, "retries": 0},
+            "dev-sp20": {"polish_shape_prior": (0.2, 2.0), "frontal_twin": False, "retries": 0},
+            "dev-retry": {"polish_shape_prior": (0.0, 2.0), "frontal_twin": False, "retries": 1},
+            "dev-twin-sp": {"polish_shape_prior": (0.05, 2.0), "frontal_twin": True, "retries": 0},
+            "dev-twin-sp-retry": {"polish_shape_prior": (0.05, 2.0), "frontal_twin": True, "retries": 1}}
 STANDING = ("a_pose", "t_pose", "arms_overhead", "hands_on_hips", "arm_forward", "arms_crossed", "wide_stance",
             "torso_twist")
 
@@ -171,6 +183,7 @@ def _fit_one(job: dict) -> dict:
             "joint_mm": 1000 * joint_error(model, V, Vt)[0],
             "stature_error_mm": 1000 * (stature - truth["studio"]["stature"]),
             "precision": prec, "recall": rec, "time_s": dt, "cpu_s": fit.timings.get("cpu"),
+            "cpu_all_s": fit.timings.get("cpu_all_attempts", fit.timings.get("cpu")),
             "start_family": fit.costs.get("start_family"), "cost": fit.costs["total"],
             # what the quality gates saw, and the fitted body (to study the gates without refitting)
             "quality": fit.quality, "shape": fit.shape.tolist(), "pose": fit.pose.tolist()}

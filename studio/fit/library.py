@@ -110,7 +110,8 @@ def frontal_twin(model, shape: np.ndarray, pose: np.ndarray) -> np.ndarray:
     f = R @ [0.0, -1.0, 0.0]  # the facing direction, the plane's normal
     a = 2.0 * np.arctan2(f[1], f[0])
     M = np.diag([-1.0, 1.0, 1.0])
-    S = np.array([[np.cos(a), -np.sin(a), 0.0], [np.sin(a), np.cos(a), 0.0], [0.0, 0.0, 1.0]]) @ M  # eq.: Rz(2α)·M
+    # the reflection through the vertical plane of normal f: Rz(2θ)·M, θ the angle of f
+    S = np.array([[np.cos(a), -np.sin(a), 0.0], [np.sin(a), np.cos(a), 0.0], [0.0, 0.0, 1.0]]) @ M
     twin = _mirror(pose)
     twin[:3] = pose[:3]
     twin[3:6] = matrix_to_rotvec(S @ R @ M)

@@ -4,6 +4,8 @@ from __future__ import annotations
 
 from dataclasses import asdict, dataclass
 
+import numpy as np
+
 from studio.fit.errors import FitError
 
 __all__ = ["FitOptions"]
@@ -150,6 +152,11 @@ class FitOptions:
             raise FitError(f"search_model: expected 'scape' or 'cylinder', got {self.search_model!r}")
         if self.start not in ("library", "stride"):
             raise FitError(f"start: expected 'library' or 'stride', got {self.start!r}")
+        prior = self.polish_shape_prior
+        if (len(prior) != 2 or not all(np.isfinite(float(v)) and float(v) >= 0 for v in prior)):
+            raise FitError(f"polish_shape_prior: expected (weight >= 0, threshold σ >= 0), got {prior!r}")
+        if isinstance(self.retries, bool) or int(self.retries) != self.retries or self.retries < 0:
+            raise FitError(f"retries: expected an integer >= 0, got {self.retries!r}")
 
     def to_dict(self) -> dict:
         return {k: list(v) if isinstance(v, tuple) else v for k, v in asdict(self).items()}

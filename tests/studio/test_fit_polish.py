@@ -109,3 +109,16 @@ def test_the_shape_prior_rows_are_zero_inside_the_threshold_and_pull_back_beyond
     free, _, _ = lsq_polish(obj, x_start, bounds, step, max_nfev=15)
     pulled, _, _ = lsq_polish(obj, x_start, bounds, step, max_nfev=15, shape_prior=(1.0, 0.5))
     assert abs(pulled[-3]) < abs(free[-3])
+
+
+@pytest.mark.parametrize("bad, field", [({"polish_shape_prior": (0.05,)}, "polish_shape_prior"),
+                                        ({"polish_shape_prior": (-1.0, 2.0)}, "polish_shape_prior"),
+                                        ({"polish_shape_prior": (0.05, float("nan"))}, "polish_shape_prior"),
+                                        ({"retries": -1}, "retries"), ({"retries": 1.5}, "retries"),
+                                        ({"search_model": "cones"}, "search_model"), ({"start": "hull"}, "start")])
+def test_bad_fit_options_name_the_field(bad, field):
+    from studio.fit import FitError
+
+    with pytest.raises(FitError, match=f"^{field}: expected"):
+        FitOptions(**bad)
+    assert FitOptions(**{field: getattr(FitOptions(), field)}).to_dict() == FitOptions().to_dict()

@@ -123,6 +123,14 @@ class AdaptiveSettings:
         return cls(**d)
 
 
+@njit(cache=True, nogil=True, fastmath=True, inline="always")
+def _tinted(v0, v1, v2, m0, m1, m2, r, t0, t1, t2, band):
+    """Every channel's ratio to the background within ``band`` of the brightness ratio ``r``
+    times the shadow's tint (eq. 5.5–5.6 with a learned tint)."""
+    return (abs((v0 + 1.0) / (m0 + 1.0) - r * t0) <= band and abs((v1 + 1.0) / (m1 + 1.0) - r * t1) <= band
+            and abs((v2 + 1.0) / (m2 + 1.0) - r * t2) <= band)
+
+
 @njit(cache=True, nogil=True, fastmath=True, error_model="numpy")
 def _step(frame, mean, dev, labels, ratio8, rate, fg_rate, k, floor, dist, lo, hi, chroma, tint, scale,
           loose_hi, loose_chroma):
@@ -152,18 +160,11 @@ def _step(frame, mean, dev, labels, ratio8, rate, fg_rate, k, floor, dist, lo, h
             label = 0
             if excess >= dist:
                 label = 1
-                if lo <= r <= hi:
-                    band = chroma * r
-                    if (abs((v0 + 1.0) / (m0 + 1.0) - r * t0) <= band
-                            and abs((v1 + 1.0) / (m1 + 1.0) - r * t1) <= band
-                            and abs((v2 + 1.0) / (m2 + 1.0) - r * t2) <= band):
-                        label = 2
-                if loose_hi > 0.0 and label == 1 and lo <= r <= loose_hi:
-                    band = loose_chroma * r
-                    if (abs((v0 + 1.0) / (m0 + 1.0) - r * t0) <= band
-                            and abs((v1 + 1.0) / (m1 + 1.0) - r * t1) <= band
-                            and abs((v2 + 1.0) / (m2 + 1.0) - r * t2) <= band):
-                        label = 3  # loosely gated person: the rim may take it (_grow)
+                if lo <= r <= hi and _tinted(v0, v1, v2, m0, m1, m2, r, t0, t1, t2, chroma * r):
+                    label = 2
+                elif (loose_hi > 0.0 and lo <= r <= loose_hi
+                      and _tinted(v0, v1, v2, m0, m1, m2, r, t0, t1, t2, loose_chroma * r)):
+                    label = 3  # loosely gated person: the rim may take it (_grow)
             labels[y, x] = label
             a = rate if label == 0 else fg_rate
             mean[y, x, 0] = m0 + a * d0

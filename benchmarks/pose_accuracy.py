@@ -24,7 +24,9 @@ dev experiments of that study: ``distal`` (with a library without mirror twins) 
 ``lsq-polish`` (the default options of the code that polishes every parameter by least squares
 before a shorter final stage, ``FitOptions.polish_iterations``, the distal stage off: issue 13,
 ``benchmarks/polish_compare.py``); ``twin-retry`` (the default options of the code that holds the
-polish's shape off its bounds, polishes the front/back twin and retries a flagged frame once).
+polish's shape off its bounds, polishes the front/back twin and retries a flagged frame once), and
+that code with a part switched off: ``twin-retry-no-library`` (the stride start),
+``twin-retry-no-limb`` (no per-limb re-search).
 Dev experiments of that step (16 dev people, 64 frames): ``dev-c0`` (the ``lsq-polish`` code),
 ``dev-sp05`` / ``dev-sp20`` (``FitOptions.polish_shape_prior`` of weight 0.05 / 0.2),
 ``dev-retry`` (one retry), ``dev-twin-sp`` (``FitOptions.frontal_twin`` and the weaker prior),
@@ -63,7 +65,8 @@ FIRST_SEED = 1000  # held-out people: seeds from here up are only ever measured
 SPLITS = {"held-out": FIRST_SEED, "dev": 100}  # first seed of each split's people
 VARIANTS = {"full": {}, "no-library": {"start": "stride"}, "no-rival": {"rival_heading": False},
             "no-limb": {"limb_particles": 0}, "no-support": {"find_support": False},
-            "retry": {"retries": 1}, "twin-retry": {}, "arm-states": {}, "distal-nm": {},
+            "retry": {"retries": 1}, "twin-retry": {}, "twin-retry-no-library": {"start": "stride"},
+            "twin-retry-no-limb": {"limb_particles": 0}, "arm-states": {}, "distal-nm": {},
             "stature-distal": {"stature_steps": (-0.06, -0.045, -0.03, -0.015, 0.0, 0.015, 0.03, 0.045, 0.06)},
             "distal": {}, "lsq-polish": {},
             # dev experiments; each names its options, so it stays what it was under later defaults

@@ -105,6 +105,9 @@ def run(args) -> int:
     from studio.simulate import ensure_rendered
     from studio.workspace import Workspace
 
+    from studio.fit.units import fit_code_digest
+
+    code = fit_code_digest()
     clothing.RUN.update(name="dev-full", first_seed=clothing.SPLIT_SEEDS["dev"])
     people = clothing.subjects(max(args.subjects) + 1, args.poses, False)
     out_dir = results_dir(args.variant)
@@ -113,8 +116,8 @@ def run(args) -> int:
         p = people[i]
         for cond in args.conditions:
             path = out_dir / f"{p['name']}_{cond}.json"
-            if path.is_file():
-                continue
+            if path.is_file() and json.loads(path.read_text()).get("code") == code:
+                continue  # a result of other fitting code is redone, not mixed into the table
             folder = clothing.bench_root() / p["name"] / cond
             t = time.process_time()
             session = ensure_rendered(folder / "spec.yaml", seed=0, cache_dir=folder / "render")
@@ -125,7 +128,7 @@ def run(args) -> int:
                                       workers=args.workers, chain_length=1, options=options)
             d = diagnose(ws, batch)
             d.update(subject=p["name"], condition=cond, garment=p["garment"], variant=args.variant,
-                     batch_wall_s=batch["wall_time"], cpu_s=time.process_time() - t)
+                     batch_wall_s=batch["wall_time"], cpu_s=time.process_time() - t, code=code)
             atomic_write_json(path, d)
             print(f"{p['name']} {cond} {args.variant}: stature {1000 * (d['batch_stature'] - d['true_stature']):+.1f} mm",
                   flush=True)

@@ -146,7 +146,8 @@ def build(args) -> int:
 def _gender_single(frame, options) -> dict:
     """§6.4.5 on one pose: the frame's fit → neutral body → female / male shape steps, pose fixed."""
     from studio.body import BodyModel, measure
-    from studio.fit.batch import compare_genders, convert_shape, gender_scores
+    from studio.fit.batch import compare_genders, convert_shape
+    from studio.fit.batch_gender import gender_scores
 
     neutral = BodyModel.load("neutral")
     shape = convert_shape(BodyModel.load(frame.gender), frame.shape, neutral)

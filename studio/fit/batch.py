@@ -37,7 +37,6 @@ import numpy as np
 from studio.body import BodyModel
 from studio.body.skeleton import POSE_SIZE
 from studio.cost import CLOTHING_PRESETS, ClothingTarget, clothing_cost, shape_prior
-from studio.fit.batch_frames import CLOTHES_CHECKS, choose_frames
 from studio.fit.batch_gender import GENDER_PRIOR_WEIGHT, gender_scores, stature_evidence
 from studio.fit.batch_terms import knee_term, with_head_skin
 from studio.fit.errors import FitError
@@ -45,9 +44,8 @@ from studio.fit.library import stand_on_floor
 from studio.fit.objective import FrameObjective, pose_bounds
 from studio.optimize import Stage, staged_nelder_mead
 
-__all__ = ["CLOTHES_CHECKS", "GENDER_PRIOR_WEIGHT", "BatchFrame", "BatchOptions", "BatchResult", "ClothedObjective", "batch_fit",
-           "compare_genders", "convert_shape", "gender_scores", "stature_evidence",
-           "consistency", "choose_frames", "clothing_targets", "on_floor", "pose_step"]
+__all__ = ["BatchFrame", "BatchOptions", "BatchResult", "ClothedObjective", "batch_fit", "compare_genders",
+           "convert_shape", "consistency", "clothing_targets", "on_floor", "pose_step"]
 
 log = logging.getLogger(__name__)
 

@@ -3,7 +3,7 @@
 1. **Single-frame fits** of the candidate frames (the given ``frames``, or up to
    ``2 × n_frames`` spread evenly over the session) through :func:`studio.fit.fit_session`
    (kept when already fitted with the same settings).
-2. **Frames**: the given ones, or :func:`studio.fit.batch.choose_frames` — good quality gates,
+2. **Frames**: the given ones, or :func:`studio.fit.batch_frames.choose_frames` — good quality gates,
    diverse postures.
 3. **Skin**: a skin classifier adapted to the session from the fitted bodies' hands and face
    (:mod:`studio.fit.skin_adapt`) predicts ``F^s``; without enough visible skin, the
@@ -24,7 +24,8 @@ from dataclasses import replace
 
 import numpy as np
 
-from studio.fit.batch import BatchFrame, BatchOptions, batch_fit, choose_frames
+from studio.fit.batch import BatchFrame, BatchOptions, batch_fit
+from studio.fit.batch_frames import choose_frames
 from studio.fit.errors import FitError
 from studio.fit.frame import FitOptions
 

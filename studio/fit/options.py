@@ -155,7 +155,7 @@ class FitOptions:
         prior = self.polish_shape_prior
         if (len(prior) != 2 or not all(np.isfinite(float(v)) and float(v) >= 0 for v in prior)):
             raise FitError(f"polish_shape_prior: expected (weight >= 0, threshold σ >= 0), got {prior!r}")
-        if isinstance(self.retries, bool) or int(self.retries) != self.retries or self.retries < 0:
+        if isinstance(self.retries, bool) or not isinstance(self.retries, int) or self.retries < 0:
             raise FitError(f"retries: expected an integer >= 0, got {self.retries!r}")
 
     def to_dict(self) -> dict:

@@ -6,8 +6,9 @@ import pytest
 from studio.body import BodyModel, measure
 from studio.body.skeleton import pose_slices
 from studio.fit import FitOptions, fit_frame
-from studio.fit.batch import (GENDER_PRIOR_WEIGHT, BatchFrame, BatchOptions, batch_fit, choose_frames, convert_shape,
-                               gender_scores, on_floor, stature_evidence)
+from studio.fit.batch import BatchFrame, BatchOptions, batch_fit, convert_shape, on_floor
+from studio.fit.batch_frames import choose_frames
+from studio.fit.batch_gender import GENDER_PRIOR_WEIGHT, gender_scores, stature_evidence
 from studio.fit.errors import FitError
 from studio.fit.init import standing_pose
 from studio.render import silhouette

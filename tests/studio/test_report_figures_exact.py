@@ -17,8 +17,8 @@ import pytest
 import studio.body
 from studio.body.iso7250 import DEFINITIONS, ISO20685_MAE
 from studio.report.figures import STATUS_COLOURS, frames_figure, uncertainty_figure
-from studio.report.measurements import (REPORTED, UNITS, frames_used, load_truth, measurement_table, use_batch_shape,
-                                        write_measurements, write_measurements_csv)
+from studio.report.measurements import (LOOSE_FLAGS, REPORTED, UNITS, frames_used, load_truth, measurement_table,
+                                        use_batch_shape, write_measurements, write_measurements_csv)
 from studio.report.population import percentile_table, population_context
 from studio.workspace import Layout
 
@@ -237,18 +237,23 @@ def test_batch_shape_moves_mean_and_interval_only():
     assert use_batch_shape(no_truth, MODEL, [0.0], sex="male")["stature"]["population"]["sex"] == "male"
 
 
-def test_loose_batch_girths_are_flagged_as_upper_bounds():
+def test_loose_batch_figures_are_flagged():
     """Under loose clothes the batch body is bounded only from outside at the torso and limbs: its
-    girths, depths, hip breadth, mass and BMI are never printed as clean figures; heights and
-    lengths keep their status; a tight batch changes nothing; a failed row stays failed."""
+    girths, depths, hip breadth, mass and BMI are never printed as clean figures (upper bounds), nor
+    its heights and lengths (the knees, crotch and elbows are hidden: estimates); the shoulder
+    breadth keeps its status; a tight batch changes nothing; a failed row stays failed."""
     table = measurement_table(MODEL, {0: fit(0.0), 1: fit(2.0)})
     assert {r["status"] for r in table.values()} == {"ok"}
     loose = use_batch_shape(table, MODEL, [4.0], clothing="loose")
-    hidden = {n for n, r in loose.items() if r["status"] == "suspect"}
-    assert hidden == {"neck_circumference", "chest_circumference", "waist_circumference", "hip_circumference",
-                      "thigh_circumference", "upper_arm_circumference", "chest_depth", "hip_breadth", "mass", "bmi"}
+    bounded = {n for n, r in loose.items() if r["flags"] == [LOOSE_FLAGS["bounded"]]}
+    assert bounded == {"neck_circumference", "chest_circumference", "waist_circumference", "hip_circumference",
+                       "thigh_circumference", "upper_arm_circumference", "chest_depth", "hip_breadth", "mass", "bmi"}
+    joints = {n for n, r in loose.items() if r["flags"] == [LOOSE_FLAGS["joints"]]}
+    assert joints == {"stature", "eye_height", "shoulder_height", "elbow_height", "crotch_height", "knee_height",
+                      "shoulder_elbow_length", "elbow_wrist_length", "arm_span"}
+    assert {n for n, r in loose.items() if r["status"] == "suspect"} == bounded | joints
     assert loose["chest_circumference"]["flags"] == ["suspect: loose clothing hides the body here — an upper bound"]
-    assert loose["stature"]["status"] == "ok" and loose["stature"]["flags"] == []
+    assert loose["biacromial_breadth"]["status"] == "ok" and loose["biacromial_breadth"]["flags"] == []
     tight = use_batch_shape(table, MODEL, [4.0], clothing="tight")
     assert {r["status"] for r in tight.values()} == {"ok"} and all(r["flags"] == [] for r in tight.values())
     failed = {**table, "mass": {**table["mass"], "status": "failed", "flags": ["failed: +5.0 σ"]}}

@@ -164,7 +164,7 @@ def run_one(p: dict, condition: str, workers: int) -> dict:
     from studio.fit.batch import BatchFrame, BatchOptions
     from studio.fit.batch_session import fit_batch_session, session_skin
     from studio.fit.evaluate import surface_distance, true_mesh
-    from studio.report.measurements import load_truth
+    from studio.report.measurements import load_truth, loose_stature
     from studio.segment import segment_session
     from studio.segment.metrics import binary_scores
     from studio.simulate import ensure_rendered
@@ -213,6 +213,8 @@ def run_one(p: dict, condition: str, workers: int) -> dict:
                                  "errors_mm": {k: 1000 * (sm[k] - true_m[k]) for k in MEASURES},
                                  "measures_m": {k: sm[k] for k in MEASURES}, "gender_single": g["gender"],
                                  "gender_single_costs": g["costs"], "gender_single_terms": g["terms"]}
+    height, _ = loose_stature(bmodel, bshape, [batch["poses"][str(f)] for f in batch["frames"]])
+    out["batch"]["loose_stature_error_mm"] = 1000 * (height - true_m["stature"])
     out["batch"]["surface_mm"] = float(np.median(surf_b))
     out["batch"]["surface_per_frame_mm"] = surf_b
     # skin: segmentation's self-trained model and the session-adapted one vs the true skin
@@ -298,6 +300,27 @@ def _vote(single: dict) -> str:
     return "female" if margin > 0 else "male"
 
 
+def loose_stature_error_mm(r: dict) -> float:
+    """The stature ``studio report`` gives the batch under loose clothes
+    (:func:`studio.report.measurements.loose_stature`: its standing height) minus the true stature
+    (mm): from the result, or for a result written before it was recorded, from the session's
+    ``fit/batch.json`` (its frames and gender must be the result's)."""
+    if "loose_stature_error_mm" in r["batch"]:
+        return r["batch"]["loose_stature_error_mm"]
+    from studio.body import BodyModel
+    from studio.report.measurements import load_truth, loose_stature
+    from studio.workspace import Workspace
+
+    ws = Workspace.open(bench_root() / r["subject"] / r["condition"] / "render" / "seed0")
+    b = json.loads(ws.layout.fit_dir.joinpath("batch.json").read_text())
+    if b["frames"] != r["frames"] or b["gender"] != r["batch"]["gender"]:
+        raise SystemExit(f"{ws.layout.fit_dir / 'batch.json'}: frames {b['frames']} / gender {b['gender']}, the result "
+                         f"has {r['frames']} / {r['batch']['gender']}: run the subject again")
+    poses = [b["poses"][str(f)] for f in b["frames"]]
+    height, _ = loose_stature(BodyModel.load(b["gender"]), np.asarray(b["shape"]), poses)
+    return 1000 * (height - load_truth(ws.layout)["studio"]["stature"])
+
+
 def summarise(rows: list[dict]) -> dict:
     out = {}
     for cond in ("tight", "loose"):
@@ -310,6 +333,11 @@ def summarise(rows: list[dict]) -> dict:
             si = np.array([v["errors_mm"][k] for r in rs for v in r["single"].values()])
             s[k] = {"batch_mean_abs": float(np.mean(np.abs(b))), "batch_mean": float(np.mean(b)),
                     "single_mean_abs": float(np.mean(np.abs(si))), "single_mean": float(np.mean(si))}
+        # the stature `studio report` gives: a loose batch's standing height, a tight one's rest body
+        rep = np.array([loose_stature_error_mm(r) if cond == "loose" else r["batch"]["errors_mm"]["stature"] for r in rs])
+        s["stature_reported"] = {"batch_mean_abs": float(np.mean(np.abs(rep))), "batch_mean": float(np.mean(rep)),
+                                 "batch_max_abs": float(np.max(np.abs(rep))),
+                                 "within_10mm": int(np.sum(np.abs(rep) <= 10.0))}
         s["surface_mm"] = {"batch_median": float(np.median([r["batch"]["surface_mm"] for r in rs])),
                            "single_median": float(np.median([v["surface_mm"] for r in rs for v in r["single"].values()]))}
         # shape constancy (§6.4.2): spread across poses vs across subjects, per measurement
@@ -353,6 +381,10 @@ def table(args) -> int:
             m = s[k]
             print(f"{k:<22} {m['batch_mean_abs']:>15.1f} {m['single_mean_abs']:>16.1f} {m['batch_mean']:>+11.1f} "
                   f"{m['single_mean']:>+12.1f}")
+        sr = s["stature_reported"]
+        print(f"{'stature as reported':<22} {sr['batch_mean_abs']:>15.1f} {'':>16} {sr['batch_mean']:>+11.1f}   "
+              f"(worst {sr['batch_max_abs']:.1f}, {sr['within_10mm']} of {s['subjects']} within 10 mm; "
+              f"{'standing height' if cond == 'loose' else 'rest body'})")
         print(f"{'surface (median) mm':<22} {s['surface_mm']['batch_median']:>15.1f} {s['surface_mm']['single_median']:>16.1f}")
         print("shape constancy (sd across poses / across subjects, mm): " + ", ".join(
             f"{k.split('_')[0]} {v['within_pose_sd_mm']:.1f}/"

@@ -122,7 +122,8 @@ def gather(source, participant: Participant | None = None, *, posterior: bool = 
         model, gender, shape = BodyModel.load(batch["gender"]), batch["gender"], np.asarray(batch["shape"], float)
         sex = participant.sex or (gender if gender in ("female", "male") else "neutral")
         table = use_batch_shape(table, model, shape, load_truth(lay), sex=sex, frames=batch["frames"],
-                                clothing=batch.get("clothing"))
+                                clothing=batch.get("clothing"),
+                                poses=[batch["poses"][str(f)] for f in batch["frames"]])
     rest = model.vertices(shape)
     measured = measure_iso(rest, model.vertices(shape, t_pose(model, shape)), model.joint_regressor @ rest,
                            model.faces, model.parts, model.face_parts)

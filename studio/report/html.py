@@ -85,7 +85,8 @@ def _table_html(table: dict) -> str:
         pop_txt = "–" if pop is None else f"{_esc(pop['text'])} ({pop['z']:+.1f}, {_esc(pop['sex'])})"
         row = (f"<tr><td class=l title='{_esc(r.get('clause', ''))}'><b>{_esc(r.get('title', name))}</b><br>"
                f"<small>{_esc(r.get('clause', ''))}</small></td><td class=l><small>{_esc(r.get('definition', ''))}"
-               f"</small></td><td>{value}</td><td>{_fmt(r.get('sigma'), d)}</td>"
+               f"{'<br><i>' + _esc(r['method']) + '</i>' if r.get('method') else ''}</small></td>"
+               f"<td>{value}</td><td>{_fmt(r.get('sigma'), d)}</td>"
                f"<td>{_fmt(ci[0], d)} – {_fmt(ci[1], d)}</td><td>{comps}</td>"
                f"<td>{_fmt(r.get('iso20685_max_error'), 0)}</td><td>{meets}</td><td>{pop_txt}</td>"
                f"<td class=l>{_status_html(st, r.get('flags', []))}</td>")

@@ -242,3 +242,50 @@ def test_bad_inputs_are_named(tmp_path, capsys):
         gather(tmp_path / "absent")
     assert main(["report", str(tmp_path), "--age", "-4"]) == 1
     assert "participant age" in capsys.readouterr().err
+
+
+def test_a_loose_batch_reports_the_standing_height_as_its_stature():
+    """ISO 7250-1 stature read off posed bodies: the highest head point above the floor, median over
+    the standing poses (a squat's head 220 mm lower is left out); on the mean woman standing it is
+    her rest body's stature within 5 mm. A loose batch with its poses reports it (``method`` says
+    so, status kept); without the poses, with none standing (a lone squat), or tight, the rest
+    body's stature stands."""
+    from studio.body.skeleton import PART_NAMES, pose_slices
+    from studio.fit.init import standing_pose
+    from studio.fit.library import stand_on_floor
+    from studio.report.measurements import LOOSE_FLAGS, standing_height, use_batch_shape
+
+    model = BodyModel.load("female")
+    shape, sl = model.mean_shape(), pose_slices()
+    stand, turned = standing_pose(model), standing_pose(model)
+    turned[5] = 1.0
+    squat = standing_pose(model)
+    for leg, angle in (("upperleg_l", -1.2), ("upperleg_r", -1.2), ("lowerleg_l", 1.5), ("lowerleg_r", 1.5)):
+        squat[sl[PART_NAMES.index(leg)].start] = angle
+    poses = stand_on_floor(model, shape, np.array([squat, stand, turned]))
+    head = model.parts == PART_NAMES.index("head")
+    tops = [model.vertices(shape, p)[head, 2].max() for p in poses]
+    assert tops[1] - tops[0] > 0.2
+    height, used = standing_height(model, shape, poses)
+    assert used == [1, 2] and height == pytest.approx(np.median(tops[1:]), abs=1e-12)
+    rest = measure(model, shape)["stature"]
+    assert abs(height - rest) < 0.005
+    # lifted 40 mm off the floor, the standing height says so (the floor is world z = 0)
+    lifted = poses.copy()
+    lifted[:, 2] += 0.04
+    assert standing_height(model, shape, lifted)[0] == pytest.approx(height + 0.04, abs=1e-9)
+    row = {"mean": 1000 * rest, "ci95": [1000 * rest - 5, 1000 * rest + 5], "status": "ok", "flags": [],
+           "truth": None, "truth_anny": None, "per_frame": {}}
+    table = {"stature": dict(row), "knee_height": dict(row)}
+    loose = use_batch_shape(table, model, shape, frames=[10, 11, 12], clothing="loose", poses=lifted)
+    assert loose["stature"]["mean"] == pytest.approx(1000 * (height + 0.04), abs=1e-6)
+    assert loose["stature"]["status"] == "ok" and "frame(s) [11, 12]" in loose["stature"]["method"]
+    assert loose["knee_height"]["flags"] == [LOOSE_FLAGS["joints"]]
+    bare = use_batch_shape(table, model, shape, frames=[10, 11, 12], clothing="loose")
+    assert bare["stature"]["mean"] == pytest.approx(1000 * rest, abs=1e-6)
+    assert bare["stature"]["flags"] == [LOOSE_FLAGS["joints"]] and "method" not in bare["stature"]
+    crouched = use_batch_shape(table, model, shape, frames=[10], clothing="loose", poses=poses[:1])
+    assert crouched["stature"]["mean"] == pytest.approx(1000 * rest, abs=1e-6)  # no frame stood: the rest body's
+    assert crouched["stature"]["flags"] == [LOOSE_FLAGS["joints"]] and "method" not in crouched["stature"]
+    tight = use_batch_shape(table, model, shape, frames=[10, 11, 12], clothing="tight", poses=lifted)
+    assert tight["stature"]["mean"] == pytest.approx(1000 * rest, abs=1e-6) and "method" not in tight["stature"]

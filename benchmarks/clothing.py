@@ -30,6 +30,8 @@ single-pose on every measurement, gender by batch ≥ 98 %.
 
     ANNY_CACHE_DIR=~/.cache/anny /path/to/python-with-anny benchmarks/clothing.py build --subjects 20 --poses 11
     .venv/bin/python benchmarks/clothing.py run --subjects 20 --poses 11 --workers 2
+    # two processes side by side (about twice the throughput on 2 cores: much of a run is serial)
+    ... run --subjects 20 --poses 11 --only 0 1 2 3 4 5 6 7 8 9 & ... run --subjects 20 --poses 11 --only 10 11 …
     .venv/bin/python benchmarks/clothing.py table
     # everyday subset: 2 subjects (one of each sex) × 4 postures, tight and loose
     ... build --quick ; ... run --quick ; ... table
@@ -240,7 +242,8 @@ def run(args) -> int:
     results = root / "results"
     results.mkdir(parents=True, exist_ok=True)
     code = fit_code_digest()
-    for p in subjects(args.subjects, args.poses, args.quick):
+    people = subjects(args.subjects, args.poses, args.quick)
+    for p in [people[i] for i in args.only] if args.only else people:
         if not (root / p["name"] / "body.npz").is_file():
             print(f"{p['name']}: no truth body — run `build` first with torch + anny", file=sys.stderr)
             return 1
@@ -417,6 +420,9 @@ def main(argv=None) -> int:
     ap.add_argument("--quick", action="store_true", help="2 subjects × 4 postures (overrides --subjects/--poses)")
     ap.add_argument("--conditions", nargs="+", default=["tight", "loose"], choices=["tight", "loose"])
     ap.add_argument("--workers", type=int, default=2)
+    ap.add_argument("--only", type=int, nargs="+", metavar="I",
+                    help="run: these subjects only (indices below --subjects), e.g. a second process over the "
+                         "other half of the people: results are per subject, so two runs side by side do not collide")
     ap.add_argument("--real-skin", action="store_true", help="also the skin classifier on ../shared/data/skin")
     ap.add_argument("--split", choices=sorted(SPLIT_SEEDS), default="report",
                     help="report: seeds 2000+ (the reported figures); dev: seeds 3000+ (choose settings here)")
@@ -424,6 +430,8 @@ def main(argv=None) -> int:
     if args.quick:
         args.subjects, args.poses = 2, 4
         RUN["name"] = "quick"
+    if args.only and not all(0 <= i < args.subjects for i in args.only):
+        ap.error(f"--only: expected subject indices in 0..{args.subjects - 1}, got {args.only}")
     RUN["first_seed"] = SPLIT_SEEDS[args.split]
     if args.split != "report":
         RUN["name"] = f"{args.split}-{RUN['name']}"

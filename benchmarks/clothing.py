@@ -166,7 +166,7 @@ def run_one(p: dict, condition: str, workers: int) -> dict:
     from studio.fit.batch import BatchFrame, BatchOptions
     from studio.fit.batch_session import fit_batch_session, session_skin
     from studio.fit.evaluate import surface_distance, true_mesh
-    from studio.report.measurements import load_truth, loose_stature
+    from studio.report.measurements import load_truth
     from studio.segment import segment_session
     from studio.segment.metrics import binary_scores
     from studio.simulate import ensure_rendered
@@ -215,8 +215,7 @@ def run_one(p: dict, condition: str, workers: int) -> dict:
                                  "errors_mm": {k: 1000 * (sm[k] - true_m[k]) for k in MEASURES},
                                  "measures_m": {k: sm[k] for k in MEASURES}, "gender_single": g["gender"],
                                  "gender_single_costs": g["costs"], "gender_single_terms": g["terms"]}
-    height, _ = loose_stature(bmodel, bshape, [batch["poses"][str(f)] for f in batch["frames"]])
-    out["batch"]["loose_stature_error_mm"] = 1000 * (height - true_m["stature"])
+    out["batch"]["loose_stature_error_mm"] = _loose_stature_error_mm(batch, true_m["stature"])
     out["batch"]["surface_mm"] = float(np.median(surf_b))
     out["batch"]["surface_per_frame_mm"] = surf_b
     # skin: segmentation's self-trained model and the session-adapted one vs the true skin
@@ -303,15 +302,24 @@ def _vote(single: dict) -> str:
     return "female" if margin > 0 else "male"
 
 
+def _loose_stature_error_mm(batch: dict, true_stature: float) -> float:
+    """The stature ``studio report`` gives ``batch`` (``fit/batch.json``'s content) under loose
+    clothes (:func:`studio.report.measurements.loose_stature`: its standing height) minus the true
+    stature (mm)."""
+    from studio.body import BodyModel
+    from studio.report.measurements import loose_stature
+
+    poses = [batch["poses"][str(f)] for f in batch["frames"]]
+    height, _ = loose_stature(BodyModel.load(batch["gender"]), np.asarray(batch["shape"]), poses)
+    return 1000 * (height - true_stature)
+
+
 def loose_stature_error_mm(r: dict) -> float:
-    """The stature ``studio report`` gives the batch under loose clothes
-    (:func:`studio.report.measurements.loose_stature`: its standing height) minus the true stature
-    (mm): from the result, or for a result written before it was recorded, from the session's
-    ``fit/batch.json`` (its frames and gender must be the result's)."""
+    """:func:`_loose_stature_error_mm` of result ``r``: recorded, or for a result written before it
+    was, from the session's ``fit/batch.json`` (its frames and gender must be the result's)."""
     if "loose_stature_error_mm" in r["batch"]:
         return r["batch"]["loose_stature_error_mm"]
-    from studio.body import BodyModel
-    from studio.report.measurements import load_truth, loose_stature
+    from studio.report.measurements import load_truth
     from studio.workspace import Workspace
 
     ws = Workspace.open(bench_root() / r["subject"] / r["condition"] / "render" / "seed0")
@@ -319,9 +327,7 @@ def loose_stature_error_mm(r: dict) -> float:
     if b["frames"] != r["frames"] or b["gender"] != r["batch"]["gender"]:
         raise SystemExit(f"{ws.layout.fit_dir / 'batch.json'}: frames {b['frames']} / gender {b['gender']}, the result "
                          f"has {r['frames']} / {r['batch']['gender']}: run the subject again")
-    poses = [b["poses"][str(f)] for f in b["frames"]]
-    height, _ = loose_stature(BodyModel.load(b["gender"]), np.asarray(b["shape"]), poses)
-    return 1000 * (height - load_truth(ws.layout)["studio"]["stature"])
+    return _loose_stature_error_mm(b, load_truth(ws.layout)["studio"]["stature"])
 
 
 def summarise(rows: list[dict]) -> dict:

@@ -101,11 +101,10 @@ def run(args) -> int:
     from rigs.atomic import atomic_write_json
     from studio.fit.batch import BatchOptions
     from studio.fit.batch_session import fit_batch_session
+    from studio.fit.units import fit_code_digest
     from studio.segment import segment_session
     from studio.simulate import ensure_rendered
     from studio.workspace import Workspace
-
-    from studio.fit.units import fit_code_digest
 
     code = fit_code_digest()
     clothing.RUN.update(name="dev-full", first_seed=clothing.SPLIT_SEEDS["dev"])

@@ -17,8 +17,9 @@ import numpy as np
 
 from studio.body.iso7250 import DEFINITIONS, ISO_NAMES
 
-__all__ = ["LOOSE_FLAGS", "REPORTED", "STANDING_GAP", "STANDING_WINDOW", "UNITS", "frames_used", "load_truth", "loose_flag",
-           "loose_stature", "measurement_table", "standing_height", "use_batch_shape", "write_measurements", "write_measurements_csv"]
+__all__ = ["LOOSE_FLAGS", "REPORTED", "STANDING_GAP", "STANDING_WINDOW", "UNITS", "frames_used", "load_truth",
+           "loose_flag", "loose_stature", "measurement_table", "standing_height", "use_batch_shape",
+           "write_measurements", "write_measurements_csv"]
 
 #: Measurements reported, in order (:data:`studio.body.iso7250.ISO_NAMES`).
 REPORTED = ISO_NAMES

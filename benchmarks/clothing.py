@@ -116,7 +116,7 @@ def _check_poses(folder: Path, p: dict) -> str | None:
         have = [str(s) for s in z["pose_names"]] if "pose_names" in z.files else None
     if have is not None and have != p["poses"]:
         return (f"{folder / 'body.npz'}: built with postures {have}, asked for {p['poses']} — ask for the "
-                f"--poses it was built with, or remove {folder} (its renders and results go with it) and build again")
+                f"--poses it was built with, give another --cache, or remove {folder} (its renders and results go with it) and build again")
     return None
 
 
@@ -429,6 +429,9 @@ def main(argv=None) -> int:
     ap.add_argument("--only", type=int, nargs="+", metavar="I",
                     help="run: these subjects only (indices below --subjects), e.g. a second process over the "
                          "other half of the people: results are per subject, so two runs side by side do not collide")
+    ap.add_argument("--cache", default=None, metavar="NAME",
+                    help="the cache folder's name (default: full, or quick with --quick; dev- in front for the dev "
+                         "split), e.g. another posture count than a cache was built with")
     ap.add_argument("--real-skin", action="store_true", help="also the skin classifier on ../shared/data/skin")
     ap.add_argument("--split", choices=sorted(SPLIT_SEEDS), default="report",
                     help="report: seeds 2000+ (the reported figures); dev: seeds 3000+ (choose settings here)")
@@ -436,6 +439,8 @@ def main(argv=None) -> int:
     if args.quick:
         args.subjects, args.poses = 2, 4
         RUN["name"] = "quick"
+    if args.cache:
+        RUN["name"] = args.cache
     if args.only and not all(0 <= i < args.subjects for i in args.only):
         ap.error(f"--only: expected subject indices in 0..{args.subjects - 1}, got {args.only}")
     RUN["first_seed"] = SPLIT_SEEDS[args.split]

@@ -75,7 +75,10 @@ VARIANTS = {"full": {}, "no-library": {"start": "stride"}, "no-rival": {"rival_h
             "dev-sp20": {"polish_shape_prior": (0.2, 2.0), "frontal_twin": False, "retries": 0},
             "dev-retry": {"polish_shape_prior": (0.0, 2.0), "frontal_twin": False, "retries": 1},
             "dev-twin-sp": {"polish_shape_prior": (0.05, 2.0), "frontal_twin": True, "retries": 0},
-            "dev-twin-sp-retry": {"polish_shape_prior": (0.05, 2.0), "frontal_twin": True, "retries": 1}}
+            "dev-twin-sp-retry": {"polish_shape_prior": (0.05, 2.0), "frontal_twin": True, "retries": 1},
+            "dev-base": {"polish_shape_free": 0}, "dev-ps20": {"polish_shape_free": 20},
+            "dev-ps30": {"polish_shape_free": 30}, "dev-ps30-i25": {"polish_shape_free": 30, "polish_iterations": 25},
+            "polish-shape": {}, "polish-shape-no-library": {"start": "stride"}}
 STANDING = ("a_pose", "t_pose", "arms_overhead", "hands_on_hips", "arm_forward", "arms_crossed", "wide_stance",
             "torso_twist")
 

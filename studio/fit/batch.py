@@ -13,7 +13,7 @@ on the shared coefficients with every pose held), starting from the single-frame
 **Gender by batch** (§6.4.5): the neutral model is fitted first (poses and shape alternate);
 then, poses fixed, the first ``gender_shape_free`` coefficients of the female and of the male
 model are re-estimated from the neutral body; the lower score wins (its margin is reported) and
-is refined by one more round. The score is the batch cost (eq. 6.7) plus
+is refined by one more round. The score is the batch cost (eq. 6.7) per frame plus
 :data:`GENDER_PRIOR_WEIGHT` × −2 log-likelihood of the neutral body's stature among that sex in
 ANSUR II (:func:`gender_scores`): the thesis' prior (eq. 6.8) is flat within 3 σ and under loose
 clothing the cost alone was fitting noise biased to the smaller female model (a loosely dressed
@@ -446,7 +446,8 @@ def batch_fit(frames: list[BatchFrame], *, gender: str = "auto", options: BatchO
         cands = compare_genders(frames, first, shape, poses, options)
         from studio.body import measure
 
-        gender_terms = gender_scores(cands, measure(first, shape)["stature"], options.gender_shape_free)
+        gender_terms = gender_scores(cands, measure(first, shape)["stature"], options.gender_shape_free,
+                                     n_frames=len(frames))
         history += [{"model": g, "round": "gender", **v} for g, v in gender_terms.items()]
         gender_costs = {g: v["score"] for g, v in gender_terms.items()}
         win = min(gender_costs, key=gender_costs.get)

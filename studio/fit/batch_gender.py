@@ -15,10 +15,15 @@ from studio.fit.errors import FitError
 
 __all__ = ["GENDER_PRIOR_WEIGHT", "gender_scores", "stature_evidence"]
 
-#: Weight of the stature evidence in the gender decision (:func:`gender_scores`). Chosen on the
-#: clothing benchmark's dev split (seeds 3000–3005, loose): the cost alone called 5 of 6 batches
-#: right (a 1.86 m man female by 0.027), every weight from 0.01 up 6 of 6; 0.1 lets the cost
-#: decide for statures both sexes share (at 1.69 m the two terms differ by 0.015).
+#: Weight of the stature evidence against the batch cost per frame in the gender decision
+#: (:func:`gender_scores`). First chosen against the summed cost on 4-posture dev batches (seeds
+#: 3000–3005, loose: every weight from 0.01 up 6 of 6); in 11-posture batches the sum weighed the
+#: cost ~3× more and the reported run called 3 of 40 batches wrong. Per frame, on the clothing
+#: benchmark's 11-posture dev split (``--split dev --cache p11``: seeds 3000–3007, tight and
+#: loose, 16 batches of 2–11 frames after the gates): the cost alone 14 of 16 (two loose men
+#: called female, per-frame costs +0.031 and +0.024), every weight in (0.073, 0.386) 16 of 16 (a
+#: 1.68 m man in tight clothes went female beyond it); the smallest of 0.01 / 0.02 / 0.05 / 0.1 /
+#: 0.2 / … inside it, since the dev split has no tall women nor short men to bound it from above.
 GENDER_PRIOR_WEIGHT = 0.1
 
 
@@ -38,11 +43,14 @@ def stature_evidence(stature: float, gender: str) -> float:
     return float(((stature - ref["mean"]) / ref["std"]) ** 2 + 2.0 * np.log(ref["std"]))
 
 
-def gender_scores(candidates: dict, stature: float, n_coefficients: int, weight: float = GENDER_PRIOR_WEIGHT) -> dict:
+def gender_scores(candidates: dict, stature: float, n_coefficients: int, weight: float = GENDER_PRIOR_WEIGHT,
+                  n_frames: int = 1) -> dict:
     """The gender decision from :func:`compare_genders`' ``{gender: (model, shape, cost, start)}``
-    and the batch body's ``stature`` (m, the neutral model's):
+    of a batch of ``n_frames`` frames and the batch body's ``stature`` (m, the neutral model's):
     ``{gender: {"cost", "stature", "mahalanobis", "mahalanobis_fit", "score"}}`` with ``stature``
-    :func:`stature_evidence` and ``score`` = cost + ``weight`` × stature; the lowest score wins.
+    :func:`stature_evidence` and ``score`` = cost / ``n_frames`` + ``weight`` × stature; the lowest
+    score wins. The cost is a sum over the frames (eq. 6.7), the stature one per person: per frame,
+    the two weigh the same in a batch of 2 frames as of 11.
     ``mahalanobis`` / ``mahalanobis_fit``: Σ_{b < k} (β_b / σ_b)² over the first
     ``n_coefficients`` of ``start`` (the batch body in that gender's PCA) / of the re-estimated
     shape — reported, not scored (on the dev split they called 5 of 6 loose batches right, the
@@ -50,9 +58,12 @@ def gender_scores(candidates: dict, stature: float, n_coefficients: int, weight:
     weight = float(weight)
     if not np.isfinite(weight) or weight < 0:
         raise FitError(f"gender prior weight: expected a finite number >= 0, got {weight}")
+    if isinstance(n_frames, bool) or int(n_frames) != n_frames or n_frames < 1:
+        raise FitError(f"gender decision: expected a batch of at least 1 frame, got {n_frames!r}")
     out = {}
     for g, (model, shape, cost, start) in candidates.items():
         e = stature_evidence(stature, g)
         out[g] = {"cost": float(cost), "stature": e, "mahalanobis": _mahalanobis(model, start, n_coefficients),
-                  "mahalanobis_fit": _mahalanobis(model, shape, n_coefficients), "score": float(cost) + weight * e}
+                  "mahalanobis_fit": _mahalanobis(model, shape, n_coefficients),
+                  "score": float(cost) / n_frames + weight * e}
     return out

@@ -248,7 +248,7 @@ def run_batch_command(args, ws, frames, options: FitOptions) -> int:
     margin = ""
     if obj["gender_margin"] is not None:
         loser = max(obj["gender_costs"], key=obj["gender_costs"].get)
-        margin = f" (cost margin {obj['gender_margin']:.3f} over {loser})"
+        margin = f" (score margin {obj['gender_margin']:.3f} per frame over {loser})"
     print(f"batch of {len(obj['frames'])} frames {obj['frames']}: {obj['gender']}{margin}, clothing {obj['clothing']}, "
           f"stature {obj['measurements']['stature'] * 1000:.0f} mm, cost {obj['total']:.2f} in {obj['wall_time']:.0f} s; "
           f"results in {ws.layout.fit_batch}")

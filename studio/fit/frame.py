@@ -391,19 +391,37 @@ def fit_frame(
         # trust-region least squares on a smooth stand-in of the cost, every parameter at once at
         # full resolution (Nelder–Mead over ~40 parameters stalls short of the cost's minimum);
         # its best iterate by the cost itself is kept
-        x_nm, c_nm, polish = lsq_polish(obj, x_nm, (blo, bhi), step, level=final, max_nfev=options.polish_iterations,
-                                        shape_prior=options.polish_shape_prior)
+        # (with more shape coefficients than the search when ``polish_shape_free`` says so: the
+        # least squares handle them at the cost of a Jacobian column each)
+        n_polish = min(max(options.polish_shape_free, n_free), model.n_shape) if n_free else 0
+        pobj, (plo, phi), pstep = obj, (blo, bhi), step
+        if n_polish > n_free:
+            pobj = FrameObjective(model, cameras, targets, base_shape, n_polish, options.prior_weight, shadow=shadow)
+            psig = np.sqrt(model.eigenvalues[:n_polish])
+            plo, phi = np.concatenate([lo, -3 * psig]), np.concatenate([hi, 3 * psig])
+            pstep = np.concatenate([step[:POSE_SIZE], 0.5 * psig])
+        s_nm, p_nm = obj.split(x_nm[None])
+        x_p, c_nm, polish = lsq_polish(pobj, np.clip(pobj.pack(s_nm[0], p_nm[0]), plo, phi), (plo, phi), pstep,
+                                       level=final, max_nfev=options.polish_iterations,
+                                       shape_prior=options.polish_shape_prior)
         if options.frontal_twin and previous_pose is None:
             # the front/back twin of the answer (reflected through its frontal plane) polished
             # too; the lower cost is kept: a body facing the wrong way explains the silhouettes
             # nearly as well, and no local search turns it round
-            s_nm, p_nm = obj.split(x_nm[None])
-            twin = obj.pack(s_nm[0], frontal_twin(model, s_nm[0], model.clip_pose(p_nm[0])))
-            x_tw, c_tw, _ = lsq_polish(obj, np.clip(twin, blo, bhi), (blo, bhi), step, level=final,
+            s_p, p_p = pobj.split(x_p[None])
+            twin = pobj.pack(s_p[0], frontal_twin(model, s_p[0], model.clip_pose(p_p[0])))
+            x_tw, c_tw, _ = lsq_polish(pobj, np.clip(twin, plo, phi), (plo, phi), pstep, level=final,
                                        max_nfev=options.polish_iterations, shape_prior=options.polish_shape_prior)
             twin_costs = [c_nm, c_tw]
             if c_tw < c_nm:
-                x_nm = x_tw
+                x_p = x_tw
+        if pobj is not obj:  # the final stage frees the search's coefficients, the others stay polished
+            s_p, p_p = pobj.split(x_p[None])
+            n_early += pobj.n_evaluations
+            obj = FrameObjective(model, cameras, targets, s_p[0], n_free, options.prior_weight, shadow=shadow,
+                                 n_evaluations=obj.n_evaluations)
+            x_p = obj.pack(s_p[0], p_p[0])
+        x_nm = x_p
     timings["polish"] = time.perf_counter() - t
     t = time.perf_counter()
     last = [Stage(tuple(range(6)) + tuple(shape_idx) + tuple(i for g in _part_groups()[:1] for i in g),

@@ -88,6 +88,16 @@ class FitOptions:
     gate, 6 of them closer than 10 mm). Dev people (64 frames, 16 people, side by side): (0.05, 2)
     frames at a bound 2 → 0, median surface 6.73 → 6.75 mm, mean 8.38 → 8.36, p90 13.8 → 13.5;
     (0.2, 2) the same within 0.1 mm, so the weaker one.
+    ``polish_shape_free``: shape coefficients the polish frees (0 or fewer than ``n_shape_free``:
+    those of the search); the final stage then frees the search's again, the rest stay as polished.
+    The model's ceiling (``benchmarks/pose_ceiling.py``) had put P/R 0.967/0.968 with the search's
+    10 coefficients against 0.975/0.972 with all 30; Nelder–Mead had not gained from more (above),
+    least squares pay one Jacobian column per coefficient. Dev people (64 frames, side by side in
+    one run): 10 → 20 median surface 6.72 → 6.40 mm (mean 7.74 → 7.53, p90 11.5 → 11.2, 31 frames
+    closer and 11 farther by more than 0.2 mm), P/R 0.964/0.964 → 0.968/0.965, median stature
+    −4.3 → 0.0 mm, ``ok`` 95.3 → 96.9 %, CPU 12.3 → 13.2 s per frame; 30: the same within noise
+    (6.42 mm, P/R 0.968/0.965, ``ok`` 95.3 %) at 13.8 s, and with 25 iterations instead of 15 (on
+    58 of the frames) 4 frames closer, none farther, at +2.4 s CPU: so 20 and 15.
     ``frontal_twin``: a frame fitted from its silhouettes also polishes the front/back twin of the
     polished answer (:func:`studio.fit.library.frontal_twin`: reflected through its own frontal
     plane, facing the other way, sides swapped) and keeps the lower cost: a body fitted facing
@@ -131,6 +141,7 @@ class FitOptions:
     distal_share: float = 0.0
     polish_iterations: int = 15
     polish_shape_prior: tuple[float, float] = (0.05, 2.0)
+    polish_shape_free: int = 20
     frontal_twin: bool = True
     stature_steps: tuple[float, ...] = ()
     partition_particles: int = 40
@@ -155,6 +166,9 @@ class FitOptions:
         prior = self.polish_shape_prior
         if (len(prior) != 2 or not all(np.isfinite(float(v)) and float(v) >= 0 for v in prior)):
             raise FitError(f"polish_shape_prior: expected (weight >= 0, threshold σ >= 0), got {prior!r}")
+        if isinstance(self.polish_shape_free, bool) or not isinstance(self.polish_shape_free, int) \
+                or self.polish_shape_free < 0:
+            raise FitError(f"polish_shape_free: expected an integer >= 0, got {self.polish_shape_free!r}")
         if isinstance(self.retries, bool) or not isinstance(self.retries, int) or self.retries < 0:
             raise FitError(f"retries: expected an integer >= 0, got {self.retries!r}")
 

@@ -230,7 +230,7 @@ def _batch_html(batch: dict | None) -> str:
     if batch is None:
         return ""
     margin = ("" if batch.get("gender_margin") is None else
-              f", gender by batch with a cost margin of {batch['gender_margin']:.3f}")
+              f", gender by batch with a score margin of {batch['gender_margin']:.3f} per frame")
     cons = batch.get("consistency") or {}
     warn = (f" <b>Flagged: the frames may not show one person ({_esc('; '.join(cons.get('reasons', [])))}).</b>"
             if cons.get("flagged") else "")

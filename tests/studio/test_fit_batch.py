@@ -128,7 +128,8 @@ def test_gender_by_batch_reports_both_costs_and_the_margin(frames):
     assert res.gender == "female" and res.margin > 0
     terms = res.gender_terms
     for g in ("female", "male"):
-        assert terms[g]["score"] == pytest.approx(terms[g]["cost"] + GENDER_PRIOR_WEIGHT * terms[g]["stature"])
+        # the batch cost per frame (2 frames) plus the stature evidence
+        assert terms[g]["score"] == pytest.approx(terms[g]["cost"] / 2 + GENDER_PRIOR_WEIGHT * terms[g]["stature"])
         assert terms[g]["score"] == res.gender_costs[g]
     assert res.to_json()["gender_terms"] == terms
 
@@ -175,6 +176,14 @@ def test_gender_decision_adds_the_stature_evidence():
     assert stature_evidence(1.62, "female") < stature_evidence(1.62, "male")
     with pytest.raises(FitError, match="gender prior weight: expected a finite number >= 0"):
         gender_scores(cands, 1.86, 3, weight=-1.0)
+    with pytest.raises(FitError, match="gender decision: expected a batch of at least 1 frame, got 0"):
+        gender_scores(cands, 1.86, 3, n_frames=0)
+    # the cost is a sum over frames, the stature evidence one per person: a batch of 11 frames
+    # that each cost what this one-frame batch costs scores the same, so the same gender wins
+    eleven = {g: c[:2] + (11 * c[2],) + c[3:] for g, c in cands.items()}
+    many = gender_scores(eleven, 1.86, 3, weight=0.1, n_frames=11)
+    for g in terms:
+        assert many[g]["score"] == pytest.approx(terms[g]["score"]) and many[g]["cost"] == pytest.approx(11 * terms[g]["cost"])
 
 
 def test_shapes_convert_between_gender_models():

@@ -115,6 +115,8 @@ def test_the_shape_prior_rows_are_zero_inside_the_threshold_and_pull_back_beyond
                                         ({"polish_shape_prior": (-1.0, 2.0)}, "polish_shape_prior"),
                                         ({"polish_shape_prior": (0.05, float("nan"))}, "polish_shape_prior"),
                                         ({"retries": -1}, "retries"), ({"retries": 1.5}, "retries"),
+                                        ({"polish_shape_free": -1}, "polish_shape_free"),
+                                        ({"polish_shape_free": True}, "polish_shape_free"),
                                         ({"search_model": "cones"}, "search_model"), ({"start": "hull"}, "start")])
 def test_bad_fit_options_name_the_field(bad, field):
     from studio.fit import FitError
@@ -122,3 +124,29 @@ def test_bad_fit_options_name_the_field(bad, field):
     with pytest.raises(FitError, match=f"^{field}: expected"):
         FitOptions(**bad)
     assert FitOptions(**{field: getattr(FitOptions(), field)}).to_dict() == FitOptions().to_dict()
+
+
+def test_the_polish_frees_more_shape_coefficients_than_the_search_when_asked():
+    """``FitOptions.polish_shape_free`` above ``n_shape_free``: the polish moves the extra
+    coefficients (within ±3 σ), the final stage keeps them as polished and frees the search's
+    again, the coefficients beyond stay at the start's; everything before the polish is the same
+    fit as without it (same seed)."""
+    from dataclasses import replace
+
+    from studio.fit import fit_frame
+
+    model = BodyModel.load("female")
+    cams = ring_cameras()
+    shape, pose = true_body(model)
+    masks = [silhouette(c, model.vertices(shape, pose), model.faces) for c in cams]
+    tiny = FitOptions(levels=(2, 2, 0), n_particles=8, n_layers=1, nm_evaluations=4, final_evaluations=4,
+                      n_shape_free=2, polish_shape_free=0, polish_iterations=4, partition_particles=0,
+                      partition_layers=0, limb_particles=0, rival_heading=False, find_support=False, retries=0,
+                      frontal_twin=False)
+    base = fit_frame(model, cams, masks, options=tiny, seed=5)
+    wide = fit_frame(model, cams, masks, options=replace(tiny, polish_shape_free=6), seed=5)
+    assert wide.costs["polish"][0] == base.costs["polish"][0]  # the same body reached the polish
+    sig = np.sqrt(model.eigenvalues)
+    moved = np.abs(wide.shape[2:6] - base.shape[2:6]) / sig[2:6]
+    assert np.any(moved > 0.05) and np.all(np.abs(wide.shape[:6] / sig[:6]) <= 3 + 1e-9)
+    np.testing.assert_array_equal(wide.shape[6:], base.shape[6:])  # never freed: the start's

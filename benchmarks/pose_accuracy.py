@@ -30,7 +30,9 @@ that code with a part switched off: ``twin-retry-no-library`` (the stride start)
 Dev experiments of that step (16 dev people, 64 frames): ``dev-c0`` (the ``lsq-polish`` code),
 ``dev-sp05`` / ``dev-sp20`` (``FitOptions.polish_shape_prior`` of weight 0.05 / 0.2),
 ``dev-retry`` (one retry), ``dev-twin-sp`` (``FitOptions.frontal_twin`` and the weaker prior),
-``dev-twin-sp-retry`` (all three). ``--families`` fits only the frames
+``dev-twin-sp-retry`` (all three). ``polish-shape`` (the default options of the code whose polish frees
+20 shape coefficients, ``FitOptions.polish_shape_free``) and its dev experiments: ``dev-base`` (10, as the
+search), ``dev-ps20``, ``dev-ps30``, ``dev-ps30-i25`` (30 and 25 polish iterations). ``--families`` fits only the frames
 of the named posture families (e.g. ``--families seated`` for ``no-support``).
 
 Splits (``--split``): ``held-out`` (the default, seeds from 1000, only ever measured: the figures
@@ -78,7 +80,7 @@ VARIANTS = {"full": {}, "no-library": {"start": "stride"}, "no-rival": {"rival_h
             "dev-twin-sp-retry": {"polish_shape_prior": (0.05, 2.0), "frontal_twin": True, "retries": 1},
             "dev-base": {"polish_shape_free": 0}, "dev-ps20": {"polish_shape_free": 20},
             "dev-ps30": {"polish_shape_free": 30}, "dev-ps30-i25": {"polish_shape_free": 30, "polish_iterations": 25},
-            "polish-shape": {}, "polish-shape-no-library": {"start": "stride"}}
+            "polish-shape": {}}
 STANDING = ("a_pose", "t_pose", "arms_overhead", "hands_on_hips", "arm_forward", "arms_crossed", "wide_stance",
             "torso_twist")
 

@@ -116,7 +116,8 @@ def _check_poses(folder: Path, p: dict) -> str | None:
         have = [str(s) for s in z["pose_names"]] if "pose_names" in z.files else None
     if have is not None and have != p["poses"]:
         return (f"{folder / 'body.npz'}: built with postures {have}, asked for {p['poses']} — ask for the "
-                f"--poses it was built with, give another --cache, or remove {folder} (its renders and results go with it) and build again")
+                f"--poses it was built with, give another --cache, or remove {folder} (its renders and results go "
+                f"with it) and build again")
     return None
 
 

@@ -59,7 +59,7 @@ from studio.fit.init import hull_centroid, hull_height, initial_poses, stature_s
 from studio.fit.library import frontal_twin, library_match, stand_on_floor
 from studio.fit.objective import CylinderObjective, FrameObjective, pose_bounds
 from studio.fit.options import FitOptions
-from studio.fit.polish import lsq_polish
+from studio.fit.polish import polish_frame
 from studio.fit.props import find_support
 from studio.fit.quality import fit_quality, refused_quality, screen_masks
 from studio.fit.search import _arm_states, _heading, _part_groups, _partitioned_search, _partitions, _pose_sigma
@@ -360,13 +360,10 @@ def fit_frame(
     obj = FrameObjective(model, cameras, targets, base_shape, n_free, options.prior_weight, shadow=shadow)
     x0 = obj.pack(base_shape, x_pose)
     sig = np.sqrt(model.eigenvalues[:n_free])
-    blo = np.concatenate([lo, -3 * sig])
-    bhi = np.concatenate([hi, 3 * sig])
+    (blo, bhi), step = _parameter_box(model, lo, hi, n_free)
     shape_idx = list(range(POSE_SIZE, POSE_SIZE + n_free))
     stages = thesis_stages(list(range(6)), _part_groups(), shape_idx, n_shape_first=min(6, n_free),
                            n_shape_second=n_free, max_evaluations=options.nm_evaluations)
-    step = np.concatenate([np.full(POSE_SIZE, 0.08), 0.5 * sig])
-    step[:3] = 0.03
     if previous_pose is not None:  # tracking: a smaller local budget
         stages = [Stage(st.indices, max(1, int(st.max_evaluations * options.tracking_budget)), st.name)
                   for st in stages]
@@ -392,36 +389,18 @@ def fit_frame(
         # full resolution (Nelder–Mead over ~40 parameters stalls short of the cost's minimum);
         # its best iterate by the cost itself is kept
         # (with more shape coefficients than the search when ``polish_shape_free`` says so: the
-        # least squares handle them at the cost of a Jacobian column each)
+        # least squares handle them at the cost of a Jacobian column each); the front/back twin
+        # of the answer (reflected through its frontal plane) polished too and the lower cost
+        # kept: a body facing the wrong way explains the silhouettes nearly as well, and no local
+        # search turns it round
         n_polish = min(max(options.polish_shape_free, n_free), model.n_shape) if n_free else 0
-        pobj, (plo, phi), pstep = obj, (blo, bhi), step
-        if n_polish > n_free:
-            pobj = FrameObjective(model, cameras, targets, base_shape, n_polish, options.prior_weight, shadow=shadow)
-            psig = np.sqrt(model.eigenvalues[:n_polish])
-            plo, phi = np.concatenate([lo, -3 * psig]), np.concatenate([hi, 3 * psig])
-            pstep = np.concatenate([step[:POSE_SIZE], 0.5 * psig])
-        s_nm, p_nm = obj.split(x_nm[None])
-        x_p, c_nm, polish = lsq_polish(pobj, np.clip(pobj.pack(s_nm[0], p_nm[0]), plo, phi), (plo, phi), pstep,
-                                       level=final, max_nfev=options.polish_iterations,
-                                       shape_prior=options.polish_shape_prior)
-        if options.frontal_twin and previous_pose is None:
-            # the front/back twin of the answer (reflected through its frontal plane) polished
-            # too; the lower cost is kept: a body facing the wrong way explains the silhouettes
-            # nearly as well, and no local search turns it round
-            s_p, p_p = pobj.split(x_p[None])
-            twin = pobj.pack(s_p[0], frontal_twin(model, s_p[0], model.clip_pose(p_p[0])))
-            x_tw, c_tw, _ = lsq_polish(pobj, np.clip(twin, plo, phi), (plo, phi), pstep, level=final,
-                                       max_nfev=options.polish_iterations, shape_prior=options.polish_shape_prior)
-            twin_costs = [c_nm, c_tw]
-            if c_tw < c_nm:
-                x_p = x_tw
-        if pobj is not obj:  # the final stage frees the search's coefficients, the others stay polished
-            s_p, p_p = pobj.split(x_p[None])
-            n_early += pobj.n_evaluations
-            obj = FrameObjective(model, cameras, targets, s_p[0], n_free, options.prior_weight, shadow=shadow,
-                                 n_evaluations=obj.n_evaluations)
-            x_p = obj.pack(s_p[0], p_p[0])
-        x_nm = x_p
+        box, pstep = _parameter_box(model, lo, hi, n_polish)
+        twin = ((lambda s, p: frontal_twin(model, s, model.clip_pose(p)))
+                if options.frontal_twin and previous_pose is None else None)
+        obj, x_nm, polish, twin_costs, n_copy = polish_frame(obj, x_nm, box, pstep, level=final,
+                                                             iterations=options.polish_iterations,
+                                                             shape_prior=options.polish_shape_prior, twin=twin)
+        n_early += n_copy
     timings["polish"] = time.perf_counter() - t
     t = time.perf_counter()
     last = [Stage(tuple(range(6)) + tuple(shape_idx) + tuple(i for g in _part_groups()[:1] for i in g),
@@ -476,6 +455,15 @@ def fit_frame(
                           light_uncertainty=light_uncertainty, _attempt=_attempt + 1, _avoid=avoid)
         fit = _keep_best(fit, again)
     return fit
+
+
+def _parameter_box(model, lo: np.ndarray, hi: np.ndarray, n_free: int) -> tuple[tuple[np.ndarray, np.ndarray], np.ndarray]:
+    """((lower, upper) bounds, typical steps) of a pose + ``n_free`` shape vector: the pose
+    bounds ``lo`` / ``hi`` and ±3 σ of the shape; steps 0.08 rad, 3 cm at the root, σ / 2."""
+    sig = np.sqrt(model.eigenvalues[:n_free])
+    step = np.concatenate([np.full(POSE_SIZE, 0.08), 0.5 * sig])
+    step[:3] = 0.03
+    return (np.concatenate([lo, -3 * sig]), np.concatenate([hi, 3 * sig])), step
 
 
 def _keep_best(fit: FrameFit, again: FrameFit) -> FrameFit:

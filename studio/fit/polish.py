@@ -22,11 +22,14 @@ if none is lower: the stand-in's minimum is near the cost's, not on it.
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 
 from studio.blas import one_blas_thread
+from studio.body.skeleton import POSE_SIZE
 
-__all__ = ["contour_residuals", "lsq_polish", "shape_residuals"]
+__all__ = ["contour_residuals", "lsq_polish", "polish_frame", "shape_residuals"]
 
 #: Observed pixels within this many pixels of the observed outline (inside) enter the
 #: observed → model direction, every ``OBSERVED_STRIDE``-th row and column.
@@ -198,3 +201,32 @@ def lsq_polish(obj, x0, bounds, scale, *, level: int = 0, max_nfev: int = 12, ba
                       method="trf", xtol=1e-6, ftol=1e-6, callback=keep_best)
     return best["x"], best["cost"], {"cost_before": start_cost, "costs": costs, "nfev": int(r.nfev),
                                      "njev": int(r.njev or 0)}
+
+
+def polish_frame(obj, x, box, step, *, level: int, iterations: int, shape_prior=None, twin=None):
+    """The fit's polish step: :func:`lsq_polish` of ``x`` (parameters of ``obj``, a
+    :class:`~studio.fit.objective.FrameObjective`) within ``box`` = (lo, hi) with typical steps
+    ``step``, whose length may free more shape coefficients than ``obj`` does (a copy of ``obj``
+    then frees them, ``FitOptions.polish_shape_free``); with ``twin`` (``f(shape, pose) -> pose``)
+    the polished answer's twin is polished too and the lower cost kept. Returns ``(objective, x,
+    record, twin_costs, n_copy)``: the objective of the later stages (``obj``, or ``obj`` with the
+    extra coefficients held as polished in its base shape) and ``x`` in its parameters, the
+    polish's record, [cost, twin's cost] (None without ``twin``) and the evaluations the copy made."""
+    n_shape = len(box[0]) - POSE_SIZE
+    pobj = obj if n_shape == obj.n_shape_free else replace(obj, n_shape_free=n_shape, n_evaluations=0)
+    shapes, poses = obj.split(np.asarray(x, float)[None])
+    xp, cost, record = lsq_polish(pobj, pobj.pack(shapes[0], poses[0]), box, step, level=level, max_nfev=iterations,
+                                  shape_prior=shape_prior)
+    twin_costs = None
+    if twin is not None:
+        shapes, poses = pobj.split(xp[None])
+        xt, cost_t, _ = lsq_polish(pobj, pobj.pack(shapes[0], twin(shapes[0], poses[0])), box, step, level=level,
+                                   max_nfev=iterations, shape_prior=shape_prior)
+        twin_costs = [cost, cost_t]
+        if cost_t < cost:
+            xp = xt
+    if pobj is obj:
+        return obj, xp, record, twin_costs, 0
+    shapes, poses = pobj.split(xp[None])
+    out = replace(obj, base_shape=shapes[0])  # the final stage frees the search's coefficients again
+    return out, out.pack(shapes[0], poses[0]), record, twin_costs, pobj.n_evaluations

@@ -202,7 +202,7 @@ def run(args) -> int:
     person is rendered."""
     from rigs.atomic import atomic_write_json, atomic_write_text
     from studio.segment import segment_session
-    from studio.fit.units import fit_code_digest
+    from studio.fit.units import frame_fit_code_digest
     from studio.simulate import ensure_rendered
     from studio.workers import worker_pool
 
@@ -214,7 +214,7 @@ def run(args) -> int:
         if not (root / p["name"] / "body.npz").is_file():
             print(f"{p['name']}: no truth body — run `build` first with torch + anny", file=sys.stderr)
             return 1
-    code = fit_code_digest()
+    code = frame_fit_code_digest()
     other = sorted({str(r.get("code")) for r in _rows(args.variant, args.split)} - {code})
     if other and any(not (out / f"{p['name']}_{f}.json").is_file() for p in everyone for f in range(len(p["poses"]))
                      if not args.families or p["poses"][f] in args.families):

@@ -16,15 +16,19 @@ __all__ = ["code_digest"]
 
 
 @functools.lru_cache(maxsize=16)
-def code_digest(*modules: str, files: tuple[str | Path, ...] = ()) -> str:
+def code_digest(*modules: str, files: tuple[str | Path, ...] = (), exclude: tuple[str, ...] = ()) -> str:
     """16-hex digest of the source of ``modules`` (a package: every ``.py`` file under it, in path
-    order) and of ``files`` (a missing file counts as empty). Cached per process."""
+    order) and of ``files`` (a missing file counts as empty), leaving out the modules named in
+    ``exclude`` (dotted names, e.g. ``"studio.fit.batch"``). Cached per process."""
     h = hashlib.sha256()
     for name in modules:
         mod = importlib.import_module(name)
         path = Path(mod.__file__)
         sources = sorted(path.parent.rglob("*.py")) if path.name == "__init__.py" else [path]
         for src in sources:
+            dotted = ".".join((name, *src.relative_to(path.parent).with_suffix("").parts))
+            if path.name == "__init__.py" and dotted in exclude:
+                continue
             h.update(str(src.relative_to(path.parent)).encode())
             h.update(src.read_bytes())
     for f in files:

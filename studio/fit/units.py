@@ -32,7 +32,8 @@ import numpy as np
 from studio.fit.errors import FitError, UnusableFrame
 from studio.fit.frame import fit_frame, fit_frame_gender
 
-__all__ = ["MAX_TRACK_GAP", "RECOVERY_FACTOR", "chain_state", "fit_unit", "stored_fit"]
+__all__ = ["FIT_CODE", "FRAME_FIT_EXCLUDES", "MAX_TRACK_GAP", "RECOVERY_FACTOR", "chain_state", "fit_code_digest",
+           "fit_unit", "frame_fit_code_digest", "stored_fit"]
 
 log = logging.getLogger(__name__)
 
@@ -50,12 +51,29 @@ _CACHE: dict = {}
 FIT_CODE = ("studio.fit", "studio.cost", "studio.body", "studio.optimize", "studio.render")
 
 
+#: Modules of :data:`FIT_CODE` a single-frame fit never runs (the batch of chapter 6, its skin
+#: adaptation and clothing cost): left out of :func:`frame_fit_code_digest`, so a change to the
+#: batch keeps the session's single-frame fits (the batch starts from them).
+FRAME_FIT_EXCLUDES = ("studio.fit.batch", "studio.fit.batch_frames", "studio.fit.batch_gender",
+                      "studio.fit.batch_session", "studio.fit.batch_terms", "studio.fit.skin_adapt",
+                      "studio.cost.clothing")
+
+
 def fit_code_digest() -> str:
     """Digest of the fitting code and the body model file (:func:`studio.provenance.code_digest`)."""
     from studio.body.model import DATA_FILE
     from studio.provenance import code_digest
 
     return code_digest(*FIT_CODE, files=(DATA_FILE,))
+
+
+def frame_fit_code_digest() -> str:
+    """Digest of the code a single-frame fit runs: :func:`fit_code_digest` without
+    :data:`FRAME_FIT_EXCLUDES` (the ``code`` of a stored fit's run settings)."""
+    from studio.body.model import DATA_FILE
+    from studio.provenance import code_digest
+
+    return code_digest(*FIT_CODE, files=(DATA_FILE,), exclude=FRAME_FIT_EXCLUDES)
 
 
 def stored_fit(layout, frame: int, run: dict) -> dict | None:

@@ -2,7 +2,11 @@
 
 import json
 
-from studio.fit.units import FIT_CODE, fit_code_digest, stored_fit
+import ast
+import importlib
+from pathlib import Path
+
+from studio.fit.units import FIT_CODE, FRAME_FIT_EXCLUDES, fit_code_digest, frame_fit_code_digest, stored_fit
 from studio.provenance import code_digest
 from studio.workspace.layout import Layout
 
@@ -19,6 +23,15 @@ def test_code_digest_covers_every_source_of_a_package(tmp_path, monkeypatch):
     second = code_digest("pkgx")
     assert len(first) == len(second) == 16 and first != second  # a change deep inside the package counts
     assert code_digest("pkgx", files=(tmp_path / "absent.npz",)) == second  # a missing file counts as empty
+    assert code_digest("pkgx", exclude=("pkgx.sub.deep",)) != second
+    (pkg / "sub" / "deep.py").write_text("A = 3\n")
+    code_digest.cache_clear()
+    assert code_digest("pkgx", exclude=("pkgx.sub.deep",)) == code_digest("pkgx", exclude=("pkgx.sub.deep",))
+    left_out = code_digest("pkgx", exclude=("pkgx.sub.deep",))
+    (pkg / "sub" / "deep.py").write_text("A = 4\n")
+    code_digest.cache_clear()
+    assert code_digest("pkgx", exclude=("pkgx.sub.deep",)) == left_out  # an excluded module does not count
+    assert code_digest("pkgx") not in (second, left_out)
     (tmp_path / "model.npz").write_bytes(b"weights")
     assert code_digest("pkgx", files=(tmp_path / "model.npz",)) != second
 
@@ -31,3 +44,26 @@ def test_a_fit_stored_by_other_fitting_code_is_fitted_again(tmp_path):
     assert stored_fit(layout, 0, run) == {"frame": 0, "run": run}
     assert stored_fit(layout, 0, {**run, "code": "0" * 16}) is None
     assert "studio.fit" in FIT_CODE and "studio.cost" in FIT_CODE
+
+
+def test_the_single_frame_digest_leaves_out_only_modules_a_single_frame_fit_never_imports():
+    assert frame_fit_code_digest() != fit_code_digest()
+    for name in FRAME_FIT_EXCLUDES:
+        importlib.import_module(name)  # every excluded module exists (a renamed one would be digested again)
+    excluded = set(FRAME_FIT_EXCLUDES)
+    for package in FIT_CODE:
+        root = Path(importlib.import_module(package).__file__).parent
+        for src in root.rglob("*.py"):
+            dotted = ".".join((package, *src.relative_to(root).with_suffix("").parts))
+            if dotted in excluded or dotted.endswith("__init__"):
+                continue  # a package's __init__ re-exports; excluded modules may import each other
+            for node in ast.walk(ast.parse(src.read_text())):
+                names = ([node.module or ""] if isinstance(node, ast.ImportFrom)
+                         else [a.name for a in node.names] if isinstance(node, ast.Import) else [])
+                if isinstance(node, ast.ImportFrom) and node.level:
+                    base = dotted.rsplit(".", node.level)[0]
+                    names = [f"{base}.{node.module}" if node.module else base]
+                    names += [f"{names[0]}.{a.name}" for a in node.names]
+                elif isinstance(node, ast.ImportFrom):
+                    names += [f"{node.module}.{a.name}" for a in node.names]
+                assert not excluded & set(names), f"{dotted} imports {excluded & set(names)}: its digest must count it"

@@ -45,6 +45,7 @@ import argparse
 import json
 import sys
 import time
+from collections import Counter
 from pathlib import Path
 
 import numpy as np
@@ -384,6 +385,9 @@ def table(args) -> int:
         print("no results yet: run `build` then `run`")
         return 1
     summary = summarise(rows)
+    codes = Counter(str(r.get("code", "not recorded")) for r in rows)
+    print("fitting code: " + ", ".join(f"{c} ({n} results)" for c, n in codes.most_common())
+          + ("  — MIXED: the results are not one code's; `run` redoes the others" if len(codes) > 1 else ""))
     for cond, s in summary.items():
         print(f"\n== {cond} clothing: {s['subjects']} subjects, {s['frames']} frames")
         print(f"{'measure':<22} {'batch |err| mm':>15} {'single |err| mm':>16} {'batch bias':>11} {'single bias':>12}")

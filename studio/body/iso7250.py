@@ -174,14 +174,19 @@ def plane_section(vertices: np.ndarray, faces: np.ndarray, origin, normal) -> tu
 
 def _horizontal_scan(v, faces, z0, z1, pick, step=0.005):
     """The horizontal section between ``z0`` and ``z1`` (every ``step``) whose girth is the
-    ``pick`` (np.argmax / np.argmin) of all non-empty ones: (girth, ring, z)."""
+    ``pick`` (np.argmax / np.argmin) of all non-empty ones: (girth, ring, z). Bounds that cross
+    (``z0 > z1``: an extreme body, e.g. the neck's, shoulder height + 3 cm above the head top
+    − 15 cm) give the one plane halfway between them."""
     from studio.body.measure import _edges, convex_perimeter, slice_points
 
+    zs = np.arange(z0, z1 + 1e-9, step)
+    if not len(zs):
+        z0 = z1 = 0.5 * (z0 + z1)
+        zs = np.array([z0])
     e = _edges(faces)
     lo = np.minimum(v[e[:, 0], 2], v[e[:, 1], 2])
     hi = np.maximum(v[e[:, 0], 2], v[e[:, 1], 2])
     e = e[(hi >= z0) & (lo <= z1)]
-    zs = np.arange(z0, z1 + 1e-9, step)
     c = np.array([convex_perimeter(slice_points(v, faces, z, e)) for z in zs])
     if not np.any(c > 0):
         return 0.0, np.zeros((0, 3)), float(zs[0])

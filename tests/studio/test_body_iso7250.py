@@ -148,3 +148,17 @@ def test_model_measurements_against_independent_trimesh_sections(body):
     assert r["knee_height"] < r["crotch_height"] < r["elbow_height"] < r["shoulder_height"] < r["eye_height"] < r["stature"]
     assert r["neck_circumference"] < r["waist_circumference"] < r["chest_circumference"] < r["hip_circumference"]
     assert 0.29 < r["biacromial_breadth"] < 0.42 and 0.18 < r["chest_depth"] < 0.32
+
+
+def test_a_scan_whose_bounds_cross_measures_the_plane_halfway_instead_of_failing():
+    # a fitted frame's extreme shape put the neck scan's lower bound (shoulder height + 3 cm) above its
+    # upper one (head top - 15 cm): the scan had no plane and raised IndexError inside the fit
+    from studio.body.iso7250 import _horizontal_scan
+
+    v, f = _tube(r=0.1)
+    girth, ring, z = _horizontal_scan(v, f, 0.62, 0.58, np.argmin)
+    assert z == pytest.approx(0.60)
+    assert girth == pytest.approx(plane_section(v, f, [0, 0, 0.60], [0, 0, 1])[0]) and len(ring) > 3
+    assert girth == pytest.approx(2 * np.pi * 0.1, rel=0.01)
+    same, _, z_same = _horizontal_scan(v, f, 0.60, 0.60, np.argmin)  # one plane: the scan as before
+    assert (same, z_same) == (girth, z)

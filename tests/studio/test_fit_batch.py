@@ -6,6 +6,7 @@ import pytest
 from studio.body import BodyModel, measure
 from studio.body.skeleton import pose_slices
 from studio.fit import FitOptions, fit_frame
+from studio.fit.frame import build_targets
 from studio.fit.batch import BatchFrame, BatchOptions, batch_fit, convert_shape, on_floor
 from studio.fit.batch_frames import choose_frames
 from studio.fit.batch_gender import GENDER_PRIOR_WEIGHT, gender_scores, stature_evidence
@@ -65,10 +66,16 @@ def test_two_frames_of_one_person_agree_with_their_single_frame_fits(frames):
     # a tiny budget) and no farther from the truth than they are; no pose moves far from its own
     assert abs(batch - np.mean(singles)) < 0.035, (batch, singles)
     assert abs(batch - true_stature) <= max(abs(s - true_stature) for s in singles) + 0.01, (batch, singles)
+    # the poses no farther from the truth than the single fits': A0 24 mm (single 29), A1 (the
+    # single fit's wrong heading) 327 mm (322) — the pose polish moves it 72 mm from its single fit
+    # at a lower cost (4.65 → 3.65; without the polish 27 mm and no lower)
     for p, k in enumerate(("A0", "A1")):
+        J_true = model.joints(fr[k][1], fr[k][2])
         J_single = model.joints(fr[k][3].shape, fr[k][3].pose)
         J_batch = model.joints(res.shape, res.poses[p])
-        assert np.linalg.norm(J_batch - J_single, axis=1).mean() < 0.03
+        off_single, off_batch = (np.linalg.norm(J - J_true, axis=1).mean() for J in (J_single, J_batch))
+        assert off_batch < off_single + 0.01, (k, off_batch, off_single)
+        assert np.linalg.norm(J_batch - J_single, axis=1).mean() < (0.04 if k == "A0" else 0.1)
     assert not res.consistency["flagged"], res.consistency
     assert res.total == pytest.approx(res.costs.sum(), rel=0.05)
     obj = res.to_json()
@@ -241,3 +248,65 @@ def test_auto_clothing_threshold_separates_tight_from_loose_coverage():
     assert clothing_from_coverage(0.5, threshold=0.4) == "tight"
     with pytest.raises(FitError, match=r"clothing coverage: expected a share in \[0, 1\]"):
         clothing_from_coverage(1.5)
+
+
+def test_clothing_residuals_are_the_polish_residuals_under_tight_clothing_and_weight_the_clothes_when_loose(frames):
+    """The batch's least-squares stand-in of eq. 6.1–6.4 is, with τ_c = τ and λ_c = 1, exactly
+    the single-frame polish's stand-in of eq. 4.5 (residuals and Jacobian); under loose clothing
+    its clothing samples are truncated at τ_c and weighted by √λ_c."""
+    from studio.fit.batch import ClothedObjective, clothing_targets
+    from studio.fit.batch_terms import clothing_residuals
+    from studio.fit.objective import FrameObjective
+    from studio.fit.polish import contour_residuals
+
+    model, fr = frames
+    f, shape, pose, _ = fr["A0"]
+    start = pose.copy()
+    start[:2] += [0.12, -0.09]  # the body 15 cm off: both directions nonzero
+    opts = BatchOptions(clothing="tight", levels=(1, 1))
+    sil = FrameObjective(model, f.cameras, build_targets(f.masks, [c.name for c in f.cameras],
+                                                         FitOptions(levels=(1, 1, 1), tau=opts.tau)), shape, 0)
+    tight = ClothedObjective(model, f.cameras, clothing_targets(f, opts), shape, 0)
+    r_sil, j_sil = contour_residuals(sil, 1)
+    r_cl, j_cl = clothing_residuals(tight, 1)
+    h = np.full(len(start), 0.004)
+    assert np.abs(r_sil(start)).sum() > 1.0
+    np.testing.assert_allclose(r_cl(start), r_sil(start), rtol=1e-12, atol=1e-12)
+    np.testing.assert_allclose(j_cl(start, h), j_sil(start, h), rtol=1e-12, atol=1e-12)
+    # loose, no skin seen: every observed sample is clothing, truncated at τ_c and weighted √λ_c
+    loose_opts = BatchOptions(clothing="loose", levels=(1, 1))
+    tau_c, lam = loose_opts.cloth
+    loose = ClothedObjective(model, f.cameras, clothing_targets(f, loose_opts), shape, 0)
+    r_lo = clothing_residuals(loose, 1)[0](start)
+    assert len(r_lo) == len(r_cl(start))
+    # model → observed rows (the inside term) and covered samples equal; an uncovered clothing
+    # sample nearer than τ_c scaled by √λ_c, a farther one capped below that
+    full, part = r_cl(start), r_lo
+    same = np.isclose(part, full)
+    scaled = np.isclose(part, np.sqrt(lam) * full) & ~same
+    capped = ~same & ~scaled
+    assert same.sum() > 0.4 * len(full) and scaled.sum() > 20 and capped.sum() > 20, (same.sum(), scaled.sum())
+    assert np.all(part[capped] < np.sqrt(lam) * full[capped])
+
+
+def test_pose_polish_brings_a_bent_knee_back(frames):
+    """A frame's knee bent 0.3 rad more than the truth, the true shape held: the batch's pose
+    polish (least squares on the clothing residuals at full resolution) brings it back within
+    0.05 rad (cost 0.89 → 0.10, the truth's 0); the polish runs by default under tight clothing
+    only."""
+    from dataclasses import replace
+
+    from studio.fit.batch import _Batch, pose_polish
+
+    model, fr = frames
+    opts = BatchOptions(clothing="tight", levels=(0, 0), pose_iterations=10)
+    assert BatchOptions(clothing="tight").polish_iterations == 12 and BatchOptions(clothing="loose").polish_iterations == 0
+    assert BatchOptions(clothing="loose", pose_iterations=5).to_dict()["pose_iterations"] == 5
+    frame, shape, pose = fr["A0"][:3]
+    knee = pose_slices()[10]
+    off = pose.copy()
+    off[knee] += 0.3
+    c_true, c_off = _Batch(model, [frame] * 2, opts).per_frame(shape, np.array([pose, off]), 0)
+    polished, c = pose_polish(model, replace(frame, pose=off), shape, off, opts)
+    assert c_true < 1e-6 and c < 0.25 * c_off, (c, c_true, c_off)
+    assert np.abs(polished[knee] - pose[knee]).max() < 0.05, polished[knee] - pose[knee]

@@ -59,11 +59,6 @@ COST_RATIO_FLAG = 1.6
 STATURE_SPREAD_FLAG = 0.06
 
 
-#: (tight, loose) defaults of the shape steps' freedom and solver (``shape_iterations`` 0:
-#: Nelder–Mead) and of the pose polish (see :class:`BatchOptions`).
-BY_CLOTHING = {"n_shape_free": (20, 10), "shape_iterations": (12, 0), "pose_iterations": (12, 0)}
-
-
 @dataclass(frozen=True)
 class BatchOptions:
     """Settings of the batch fit.
@@ -74,26 +69,19 @@ class BatchOptions:
     shape steps on the neutral (or given) model; ``pose_evaluations`` per frame per pose step;
     ``shape_evaluations`` per shape step; ``final_evaluations`` of a last shape step at the final
     level (0: none); ``n_shape_free`` shared coefficients freed; ``gender_shape_free``
-    coefficients re-estimated per gender (thesis: 6, by Nelder–Mead). ``shape_iterations``: the
-    shape steps by trust-region least squares (:meth:`_Batch.shape_lsq`) with at most this many
-    iterations (0: Nelder–Mead with ``shape_evaluations``); ``lsq_shape_prior`` (weight, threshold
-    σ) of its shape-prior stand-in, the single-frame polish's. ``pose_iterations``: after the
-    final shape step every pose polished by trust-region least squares at the final level
-    (:func:`pose_polish`, at most this many iterations) and the shape stepped once more (with
-    ``final_evaluations``; 0: none). ``n_shape_free``, ``shape_iterations`` and ``pose_iterations``
-    default by the clothing (None: :data:`BY_CLOTHING`, read through :meth:`setting`): tight 20
-    coefficients by least squares (as the single-frame polish frees) and the pose polish; loose 10
-    by Nelder–Mead and no polish. Measured on the dev split (11 postures, gender given, the cached
-    single fits): tight without the polish each frame cost 1.26–1.49× its own single fit (median
-    over frames; 3 of 4 people flagged as two) and the surface was 6.1–7.7 mm against the single
-    fits' 5.6–7.1; with it (10 coefficients) 1.02–1.15×, none flagged, 5.5–6.9 mm — the single fits
-    end with a full-resolution polish, the batch's pose steps search the work level. With the
-    polish, 20 coefficients by least squares against 10 by Nelder–Mead on 8 people: surface median
-    6.1 vs 6.05 mm, hip |err| 13.9 vs 20.0 mm (better for 6), stature 4.6 vs 6.0, chest 28.5 vs
-    29.0, waist 11.0 vs 9.0, in half the time. Loose: the polish shrank the bodies inside the
-    clothes (one person: surface 22.8 → 27.0 mm, waist −46 → −86 mm), whose cost does not hold
-    them, and 20 coefficients by least squares moved the surface both ways (18.6–27.3 vs
-    19.5–26.7 mm on 4 people). ``normalise``: how the
+    coefficients re-estimated per gender (thesis: 6). ``pose_iterations``: after the final shape
+    step every pose polished by trust-region least squares at the final level (:func:`pose_polish`,
+    at most this many iterations) and the shape once more (with ``final_evaluations``); None
+    (:attr:`polish_iterations`): 12 under tight clothing, 0 (none) under loose. On 4 dev people
+    (11 postures, gender given) the tight batch without it cost each frame 1.26–1.49× its own
+    single fit (median over frames; 3 of 4 flagged as two people) and lay
+    further from the true body than the single fits (surface 6.1–7.7 vs 5.6–7.1 mm); with it
+    1.02–1.15×, none flagged, 5.5–6.9 mm (single 5.6–7.1): the single fits end with a
+    full-resolution polish, the batch's pose steps search the work level. 20 shape coefficients by
+    least squares (as the single-frame polish frees) instead of 10 by Nelder–Mead gave the same
+    surfaces but one (7.4 vs 6.9 mm). Under loose clothing the polish made the surface worse
+    (22.8 → 27.0 mm on one person, waist −46 → −86 mm): the polished bodies shrink inside the
+    clothes, whose cost does not hold them. ``normalise``: how the
     expansion regions are normalised (:meth:`studio.cost.ClothingTarget.build_regions`;
     ``"region"``, eq. 6.3 as printed, inflated the girths of a tightly clothed simulated man by
     100–120 mm in a 3-frame batch, ``"silhouette"`` by 21–55 mm). ``floor``: every body stands
@@ -119,11 +107,9 @@ class BatchOptions:
     pose_evaluations: int = 160
     shape_evaluations: int = 240
     final_evaluations: int = 160
-    n_shape_free: int | None = None
+    n_shape_free: int = 10
     gender_shape_free: int = 6
-    shape_iterations: int | None = None
     pose_iterations: int | None = None
-    lsq_shape_prior: tuple[float, float] = (0.05, 2.0)
     prior_weight: float = 1.0
     normalise: str = "silhouette"
     floor: bool | None = None
@@ -134,19 +120,18 @@ class BatchOptions:
         if self.clothing not in CLOTHING_PRESETS:
             raise FitError(f"clothing: expected one of {', '.join(CLOTHING_PRESETS)}, got {self.clothing!r}")
         for name in ("rounds", "pose_evaluations", "shape_evaluations", "final_evaluations", "n_shape_free",
-                     "gender_shape_free", "shape_iterations", "pose_iterations"):
+                     "gender_shape_free", "pose_iterations"):
             value = getattr(self, name)
-            if value is None and name in BY_CLOTHING:
+            if value is None and name == "pose_iterations":
                 continue
-            least = 0 if name in ("rounds", "final_evaluations", "shape_iterations", "pose_iterations") else 1
+            least = 0 if name in ("rounds", "final_evaluations", "pose_iterations") else 1
             if isinstance(value, bool) or not isinstance(value, int) or value < least:
                 raise FitError(f"{name}: expected an integer >= {least}, got {value!r}")
 
-    def setting(self, name: str) -> int:
-        """``n_shape_free``, ``shape_iterations`` or ``pose_iterations`` in force: as given, or by
-        the clothing (:data:`BY_CLOTHING`)."""
-        value = getattr(self, name)
-        return BY_CLOTHING[name][self.clothing != "tight"] if value is None else value
+    @property
+    def polish_iterations(self) -> int:
+        """``pose_iterations`` in force (given, or by default 12 under tight clothing, 0 under loose)."""
+        return (12 if self.clothing == "tight" else 0) if self.pose_iterations is None else self.pose_iterations
 
     @property
     def stands(self) -> bool:
@@ -165,7 +150,7 @@ class BatchOptions:
         out = {k: list(v) if isinstance(v, tuple) else v for k, v in asdict(self).items()}
         out["tau_cloth"], out["cloth_weight"] = self.cloth
         out["floor"] = self.stands
-        out.update({name: self.setting(name) for name in BY_CLOTHING})
+        out["pose_iterations"] = self.polish_iterations
         return out
 
 
@@ -283,9 +268,10 @@ def pose_polish(model: BodyModel, frame: BatchFrame, shape: np.ndarray, pose: np
                 options: BatchOptions) -> tuple[np.ndarray, float]:
     """One frame's pose (POSE_SIZE,) by trust-region least squares on
     :func:`~studio.fit.batch_terms.clothing_residuals` at the final level with ``shape`` held
-    (the ``pose_iterations`` in force; the single-frame polish's steps: 0.08 rad, 3 cm at the
-    root), keeping the iterate the clothing cost likes best, and that cost. The pose steps search at
-    the work level; this brings each frame's pose to full resolution as the single fits' polish does."""
+    (``options.polish_iterations`` iterations; the single-frame polish's steps: 0.08 rad, 3 cm at the
+    root), keeping the iterate the clothing cost likes best, and that cost. The pose steps search
+    at the work level; this brings each frame's pose to full resolution as the single fits' polish
+    does."""
     from scipy.optimize import least_squares
 
     from studio.blas import one_blas_thread
@@ -308,8 +294,8 @@ def pose_polish(model: BodyModel, frame: BatchFrame, shape: np.ndarray, pose: np
             best.update(x=intermediate_result.x.copy(), cost=c)
 
     one_blas_thread(least_squares)(res, x0, jac=lambda x: jac(x, np.where(x + h > hi, -h, h)),
-                                   bounds=(lo, hi), x_scale=scale, max_nfev=options.setting("pose_iterations"),
-                                   method="trf", xtol=1e-6, ftol=1e-6, callback=keep_best)
+                                   bounds=(lo, hi), x_scale=scale, max_nfev=options.polish_iterations, method="trf",
+                                   xtol=1e-6, ftol=1e-6, callback=keep_best)
     pose = model.clip_pose(best["x"])
     return (stand_on_floor(model, shape, pose[None])[0] if options.stands else pose), best["cost"]
 
@@ -355,17 +341,11 @@ class _Batch:
                      + self.options.prior_weight * shape_prior(shape, self.sigma))
 
     def shape_step(self, shape: np.ndarray, poses: np.ndarray, n_free: int, evaluations: int,
-                   level: int | None = None, method: str | None = None) -> tuple[np.ndarray, float]:
-        """The shared shape's first ``n_free`` coefficients, poses held (at the work level unless
-        ``level`` is given): by trust-region least squares (:meth:`shape_lsq`, ``method="lsq"``; the
-        default when the ``shape_iterations`` in force are > 0) or by Nelder–Mead with
-        ``evaluations`` (``"nelder-mead"``)."""
+                   level: int | None = None) -> tuple[np.ndarray, float]:
+        """The shared shape's first ``n_free`` coefficients by Nelder–Mead, poses held (at the work
+        level unless ``level`` is given)."""
         level = self.options.levels[0] if level is None else level
         n_free = min(n_free, self.model.n_shape)
-        if method is None:
-            method = "lsq" if self.options.setting("shape_iterations") else "nelder-mead"
-        if method == "lsq":
-            return self.shape_lsq(shape, poses, n_free, level)
         base = np.asarray(shape, dtype=np.float64).copy()
         sig = self.sigma[:n_free]
 
@@ -378,75 +358,6 @@ class _Batch:
                                  bounds=(-3 * sig, 3 * sig), step=0.4 * sig, adaptive=True)
         base[:n_free] = res.x
         return base, float(res.cost)
-
-    def shape_lsq(self, shape: np.ndarray, poses: np.ndarray, n_free: int, level: int) -> tuple[np.ndarray, float]:
-        """The shape step by trust-region least squares on every frame's
-        :func:`~studio.fit.batch_terms.clothing_residuals` at once (poses held), with the polish's
-        shape-prior stand-in (:func:`studio.fit.polish.shape_residuals`, ``options.lsq_shape_prior``,
-        its weight × P so that it weighs against each frame as in the polish), within ±3 σ, at most
-        ``shape_iterations`` iterations (:meth:`BatchOptions.setting`); keeps the iterate with the lowest batch cost
-        (eq. 6.7) — the start when none is lower."""
-        from types import SimpleNamespace
-
-        from scipy.optimize import least_squares
-
-        from studio.blas import one_blas_thread
-        from studio.fit.polish import FD_STEP, shape_residuals
-
-        base = np.asarray(shape, dtype=np.float64).copy()
-        sig = self.sigma[:n_free]
-        parts = [clothing_residuals(_HeldPose(o, p, base, n_free, self.options.stands), level)
-                 for o, p in zip(self.objs, np.asarray(poses, dtype=np.float64), strict=True)]
-        weight, threshold = self.options.lsq_shape_prior
-        prior = shape_residuals(SimpleNamespace(_sigma=sig, n_shape_free=n_free), weight * len(parts), threshold)
-        scale = 0.5 * sig
-        h = FD_STEP * scale
-
-        def R(b):
-            return np.concatenate([r(b) for r, _ in parts] + [prior[0](b)])
-
-        def J(b):
-            step = np.where(b + h > 3 * sig, -h, h)
-            return np.vstack([j(b, step) for _, j in parts] + [prior[1](b)])
-
-        def cost(b):
-            s = base.copy()
-            s[:n_free] = b
-            return self.total(s, poses, level)
-
-        best = {"x": base[:n_free].copy(), "cost": cost(base[:n_free])}
-
-        def keep_best(intermediate_result):
-            c = cost(intermediate_result.x)
-            if c < best["cost"]:
-                best.update(x=intermediate_result.x.copy(), cost=c)
-
-        one_blas_thread(least_squares)(R, np.clip(base[:n_free], -3 * sig, 3 * sig), jac=J,
-                                       bounds=(-3 * sig, 3 * sig), x_scale=scale,
-                                       max_nfev=self.options.setting("shape_iterations"), method="trf",
-                                       xtol=1e-6, ftol=1e-6, callback=keep_best)
-        base[:n_free] = best["x"]
-        return base, float(best["cost"])
-
-
-class _HeldPose:
-    """One frame's clothed objective as a function of the first ``n_free`` coefficients of a shared
-    shape (the rest at ``base``), its ``pose`` held: what :func:`clothing_residuals` reads."""
-
-    def __init__(self, obj: ClothedObjective, pose: np.ndarray, base: np.ndarray, n_free: int, stands: bool):
-        self.obj, self.base, self.n_free, self.stands = obj, base, n_free, stands
-        self.pose = obj.model.clip_pose(pose)
-        self.targets, self._level_cams, self.model = obj.targets, obj._level_cams, obj.model
-
-    def meshes(self, X: np.ndarray) -> np.ndarray:
-        X = np.atleast_2d(X)
-        shapes = np.repeat(self.base[None], len(X), axis=0)
-        shapes[:, : self.n_free] = X
-        V = self.model.vertices_batch(shapes, np.repeat(self.pose[None], len(X), axis=0), free_shape=self.n_free)
-        return on_floor(V) if self.stands else V
-
-    def masks(self, vertices: np.ndarray, level: int) -> list[np.ndarray]:
-        return self.obj.masks(vertices, level)
 
 
 def _pose_steps(runner, model: BodyModel, frames: list[BatchFrame], shape, poses, options,
@@ -567,7 +478,7 @@ def compare_genders(frames: list[BatchFrame], source: BodyModel, shape: np.ndarr
         m = BodyModel.load(g)
         start = convert_shape(source, shape, m)
         s, c = _Batch(m, frames, options).shape_step(start, poses, options.gender_shape_free,
-                                                    options.shape_evaluations, method="nelder-mead")
+                                                    options.shape_evaluations)
         out[g] = (m, s, c, start)
     return out
 
@@ -589,9 +500,8 @@ def batch_fit(frames: list[BatchFrame], *, gender: str = "auto", options: BatchO
     shape0 = np.mean([convert_shape(BodyModel.load(f.gender), f.shape, first) for f in frames], axis=0)
     poses = np.array([f.pose for f in frames], dtype=np.float64)
     history: list = []
-    n_free = options.setting("n_shape_free")
-    shape, poses, batch = _alternate(runner, first, frames, shape0, poses, options, options.rounds, n_free, history,
-                                     first.gender)
+    shape, poses, batch = _alternate(runner, first, frames, shape0, poses, options, options.rounds,
+                                     options.n_shape_free, history, first.gender)
     gender_costs, gender_terms, margin, model = None, None, None, first
     timings = {"first_model": round(time.perf_counter() - t0, 3)}
     if gender == "auto":
@@ -608,24 +518,24 @@ def batch_fit(frames: list[BatchFrame], *, gender: str = "auto", options: BatchO
         model, shape = cands[win][:2]
         timings["gender"] = round(time.perf_counter() - t, 3)
         t = time.perf_counter()
-        shape, poses, batch = _alternate(runner, model, frames, shape, poses, options, 1, n_free, history,
-                                         f"{win} refine")
+        shape, poses, batch = _alternate(runner, model, frames, shape, poses, options, 1, options.n_shape_free,
+                                         history, f"{win} refine")
         timings["refine"] = round(time.perf_counter() - t, 3)
     final = options.levels[-1]
     if options.final_evaluations and final != options.levels[0]:
         # the shared shape once more at the final level (full resolution: a coarse level's
         # silhouettes are a pixel fatter, measured +20-70 mm on girths without this step)
         t = time.perf_counter()
-        shape, cost = batch.shape_step(shape, poses, n_free, options.final_evaluations, level=final)
+        shape, cost = batch.shape_step(shape, poses, options.n_shape_free, options.final_evaluations, level=final)
         history.append({"model": model.gender, "round": "final", "cost": cost})
         timings["final"] = round(time.perf_counter() - t, 3)
-    if options.setting("pose_iterations"):
+    if options.polish_iterations:
         # every pose polished at the final level, then the shape once more (the single fits end with
         # a full-resolution polish of pose and shape; the batch's pose steps search the work level)
         t = time.perf_counter()
         poses = _pose_steps(runner, model, frames, shape, poses, options, polish=True)
         if options.final_evaluations:
-            shape, cost = batch.shape_step(shape, poses, n_free, options.final_evaluations, level=final)
+            shape, cost = batch.shape_step(shape, poses, options.n_shape_free, options.final_evaluations, level=final)
             history.append({"model": model.gender, "round": "polish", "cost": cost})
         timings["polish"] = round(time.perf_counter() - t, 3)
     if options.stands:

@@ -292,21 +292,16 @@ def test_clothing_residuals_are_the_polish_residuals_under_tight_clothing_and_we
 def test_pose_polish_brings_a_bent_knee_back(frames):
     """A frame's knee bent 0.3 rad more than the truth, the true shape held: the batch's pose
     polish (least squares on the clothing residuals at full resolution) brings it back within
-    0.05 rad (cost 0.89 → 0.10, the truth's 0); the polish (and the least-squares shape step over
-    20 coefficients) run by default under tight clothing only."""
+    0.05 rad (cost 0.89 → 0.10, the truth's 0); the polish runs by default under tight clothing
+    only."""
     from dataclasses import replace
 
     from studio.fit.batch import _Batch, pose_polish
 
     model, fr = frames
     opts = BatchOptions(clothing="tight", levels=(0, 0), pose_iterations=10)
-    tight, loose = BatchOptions(clothing="tight"), BatchOptions(clothing="loose")
-    assert [tight.setting(k) for k in ("n_shape_free", "shape_iterations", "pose_iterations")] == [20, 12, 12]
-    assert [loose.setting(k) for k in ("n_shape_free", "shape_iterations", "pose_iterations")] == [10, 0, 0]
-    given = BatchOptions(clothing="loose", pose_iterations=5, n_shape_free=4).to_dict()
-    assert given["pose_iterations"] == 5 and given["n_shape_free"] == 4 and given["shape_iterations"] == 0
-    with pytest.raises(FitError, match="shape_iterations: expected an integer >= 0"):
-        BatchOptions(shape_iterations=-1)
+    assert BatchOptions(clothing="tight").polish_iterations == 12 and BatchOptions(clothing="loose").polish_iterations == 0
+    assert BatchOptions(clothing="loose", pose_iterations=5).to_dict()["pose_iterations"] == 5
     frame, shape, pose = fr["A0"][:3]
     knee = pose_slices()[10]
     off = pose.copy()
@@ -315,27 +310,3 @@ def test_pose_polish_brings_a_bent_knee_back(frames):
     polished, c = pose_polish(model, replace(frame, pose=off), shape, off, opts)
     assert c_true < 1e-6 and c < 0.25 * c_off, (c, c_true, c_off)
     assert np.abs(polished[knee] - pose[knee]).max() < 0.05, polished[knee] - pose[knee]
-
-
-def test_shape_step_by_least_squares_recovers_the_shared_shape(frames):
-    """Two frames of person A at their true poses, the shape started at the mean (A is 1 σ off on the first
-    component, 0.8 σ on the third): the least-squares shape step over 5 coefficients lowers the batch cost below half
-    and brings the stature within 10 mm of the truth; the coefficients it does not free stay."""
-    from studio.fit.batch import _Batch
-
-    model, fr = frames
-    opts = BatchOptions(clothing="tight", levels=(1, 1), n_shape_free=5, shape_iterations=10)
-    pair = [fr["A0"][0], fr["A1"][0]]
-    poses = np.array([fr["A0"][2], fr["A1"][2]])
-    batch = _Batch(model, pair, opts)
-    start = model.mean_shape()
-    start[7] = 0.3 * np.sqrt(model.eigenvalues[7])
-    c0 = batch.total(start, poses, 1)
-    shape, cost = batch.shape_step(start, poses, 5, 0)
-    assert cost < 0.5 * c0, (cost, c0)
-    assert cost == pytest.approx(batch.total(shape, poses, 1))
-    stature = measure(model, shape)["stature"]
-    assert abs(stature - measure(model, fr["A0"][1])["stature"]) < 0.010, stature
-    assert np.array_equal(shape[5:], start[5:])
-    nm, _ = batch.shape_step(start, poses, 5, 30, method="nelder-mead")  # the other solver, on request
-    assert np.array_equal(nm[5:], start[5:]) and not np.array_equal(nm[:5], start[:5])

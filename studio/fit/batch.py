@@ -38,16 +38,16 @@ import numpy as np
 
 from studio.body import BodyModel
 from studio.body.skeleton import POSE_SIZE
-from studio.cost import CLOTHING_PRESETS, ClothingTarget, clothing_cost, shape_prior
+from studio.cost import CLOTHING_PRESETS, shape_prior
 from studio.fit.batch_gender import GENDER_PRIOR_WEIGHT, gender_scores, stature_evidence
-from studio.fit.batch_terms import clothing_residuals, knee_term, with_head_skin
+from studio.fit.batch_terms import ClothedObjective, clothing_residuals, clothing_targets, on_floor
 from studio.fit.errors import FitError
 from studio.fit.library import stand_on_floor
-from studio.fit.objective import FrameObjective, pose_bounds
+from studio.fit.objective import pose_bounds
 from studio.optimize import Stage, staged_nelder_mead
 
 __all__ = ["BatchFrame", "BatchOptions", "BatchResult", "ClothedObjective", "batch_fit", "compare_genders",
-           "convert_shape", "consistency", "clothing_targets", "on_floor", "pose_step"]
+           "convert_shape", "consistency", "clothing_targets", "on_floor", "pose_polish", "pose_step"]
 
 log = logging.getLogger(__name__)
 
@@ -78,8 +78,9 @@ class BatchOptions:
     further from the true body than the single fits (surface 6.1–7.7 vs 5.6–7.1 mm); with it
     1.02–1.15×, none flagged, 5.5–6.9 mm (single 5.6–7.1): the single fits end with a
     full-resolution polish, the batch's pose steps search the work level. 20 shape coefficients by
-    least squares (as the single-frame polish frees) instead of 10 by Nelder–Mead gave the same
-    surfaces but one (7.4 vs 6.9 mm). Under loose clothing the polish made the surface worse
+    least squares (as the single-frame polish frees) instead of 10 by Nelder–Mead looked better on
+    8 dev people (hip |err| 13.9 vs 20.0 mm) but not on the benchmark's reported people (hip 21.5
+    vs 19.2, waist 13.5 vs 8.2, surface 5.83 vs 5.76 mm): tried and reverted. Under loose clothing the polish made the surface worse
     (22.8 → 27.0 mm on one person, waist −46 → −86 mm): the polished bodies shrink inside the
     clothes, whose cost does not hold them. ``normalise``: how the
     expansion regions are normalised (:meth:`studio.cost.ClothingTarget.build_regions`;
@@ -169,61 +170,6 @@ class BatchFrame:
     gender: str
 
 
-def clothing_targets(frame: BatchFrame, options: BatchOptions) -> dict:
-    """{level: ClothingTarget} of a frame at the option's levels."""
-    tau_c, weight = options.cloth
-    names, skin = [c.name for c in frame.cameras], with_head_skin(frame.masks, frame.skin, options.head_skin)
-    return {lvl: ClothingTarget.build(frame.masks, skin, tau=options.tau, tau_cloth=tau_c, cloth_weight=weight,
-                                      xi=options.xi, level=lvl, names=names, normalise=options.normalise)
-            for lvl in sorted(set(options.levels))}
-
-
-def on_floor(V: np.ndarray) -> np.ndarray:
-    """Meshes (..., V, 3) moved vertically so that each one's lowest vertex lies at z = 0. Loose
-    trousers and skirts hide the feet and λ_c barely pulls, so nothing held the loose batch's soles
-    at the floor: on the dev split they lay up to 84 mm below it or 68 mm above it, with knees
-    bent 10–34° more than the truth, trading stature for pose."""
-    V = np.array(V, dtype=np.float64)
-    V[..., 2] -= V[..., 2].min(axis=-1)[..., None]
-    return V
-
-
-@dataclass
-class ClothedObjective(FrameObjective):
-    """:class:`FrameObjective` whose targets are :class:`~studio.cost.ClothingTarget` s: the
-    silhouette term is eq. 6.1 (inside + expansion) instead of eq. 4.5. ``floor``: every mesh
-    stands on the floor (:func:`on_floor`; the root height is then ignored); ``knee_weight`` > 0
-    adds :func:`~studio.fit.batch_terms.knee_term` about ``knee_ref`` (a pose)."""
-
-    floor: bool = False
-    knee_weight: float = 0.0
-    knee_ref: np.ndarray | None = None
-
-    def meshes(self, X: np.ndarray) -> np.ndarray:
-        V = super().meshes(X)
-        return on_floor(V) if self.floor else V
-
-    def silhouettes(self, V: np.ndarray, level: int) -> np.ndarray:
-        """Clothing cost (N,) of meshes (N, V, 3) at ``level``."""
-        target = self.targets[level]
-        return np.array([clothing_cost(target, self.masks(v, level)).total for v in V])
-
-    def __call__(self, X: np.ndarray, level: int) -> np.ndarray:
-        X = np.atleast_2d(np.asarray(X, dtype=np.float64))
-        sp, lp = self.priors(X)
-        self.n_evaluations += len(X)
-        knee = knee_term(self.split(X)[1], self.knee_ref, self.knee_weight) if self.knee_weight > 0 else 0.0
-        return self.silhouettes(self.meshes(X), level) + self.prior_weight * (sp + lp) + knee
-
-    def terms(self, x: np.ndarray, level: int = 0) -> dict:
-        x = np.asarray(x, dtype=np.float64)
-        cost = clothing_cost(self.targets[level], self.masks(self.meshes(x[None])[0], level))
-        sp, lp = self.priors(x[None])
-        return {"clothing": cost.as_dict(), "silhouette": cost.total, "shape_prior": float(sp[0]),
-                "pose_limits": float(lp[0]), "total": float(cost.total + self.prior_weight * (sp[0] + lp[0])),
-                "level": int(level)}
-
-
 def convert_shape(source: BodyModel, shape: np.ndarray, target: BodyModel) -> np.ndarray:
     """Coefficients of ``target`` whose rest body is closest to ``source``'s body ``shape``
     (least squares on the deformation gradients, :meth:`BodyModel.shape_from_vertices`),
@@ -306,7 +252,7 @@ def _pose_unit(payload: dict) -> tuple[list, float]:
 
     limit_blas_threads()
     model = BodyModel.load(payload["gender"])
-    step = pose_polish if payload.get("polish") else pose_step
+    step = pose_polish if payload["polish"] else pose_step
     pose, cost = step(model, payload["frame"], np.asarray(payload["shape"]), np.asarray(payload["pose"]),
                       payload["options"])
     return pose.tolist(), cost

@@ -32,7 +32,9 @@ Dev experiments of that step (16 dev people, 64 frames): ``dev-c0`` (the ``lsq-p
 ``dev-retry`` (one retry), ``dev-twin-sp`` (``FitOptions.frontal_twin`` and the weaker prior),
 ``dev-twin-sp-retry`` (all three). ``polish-shape`` (the default options of the code whose polish frees
 20 shape coefficients, ``FitOptions.polish_shape_free``) and its dev experiments: ``dev-base`` (10, as the
-search), ``dev-ps20``, ``dev-ps30``, ``dev-ps30-i25`` (30 and 25 polish iterations). ``--families`` fits only the frames
+search), ``dev-ps20``, ``dev-ps30``, ``dev-ps30-i25`` (30 and 25 polish iterations). ``crossed`` (the default
+options of the code whose library posture ``arms_crossed`` crosses the forearms in front of the chest; until
+then its hands sat out beside the shoulders) and ``dev-crossed`` (the same on the dev people). ``--families`` fits only the frames
 of the named posture families (e.g. ``--families seated`` for ``no-support``).
 
 Splits (``--split``): ``held-out`` (the default, seeds from 1000, only ever measured: the figures
@@ -80,7 +82,9 @@ VARIANTS = {"full": {}, "no-library": {"start": "stride"}, "no-rival": {"rival_h
             "dev-twin-sp-retry": {"polish_shape_prior": (0.05, 2.0), "frontal_twin": True, "retries": 1},
             "dev-base": {"polish_shape_free": 0}, "dev-ps20": {"polish_shape_free": 20},
             "dev-ps30": {"polish_shape_free": 30}, "dev-ps30-i25": {"polish_shape_free": 30, "polish_iterations": 25},
-            "polish-shape": {}}
+            "polish-shape": {},
+            # issue 13: the library's arms crossed made crossed (it had the hands out beside the shoulders)
+            "dev-crossed": {}, "crossed": {}}
 STANDING = ("a_pose", "t_pose", "arms_overhead", "hands_on_hips", "arm_forward", "arms_crossed", "wide_stance",
             "torso_twist")
 

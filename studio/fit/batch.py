@@ -218,32 +218,18 @@ def pose_polish(model: BodyModel, frame: BatchFrame, shape: np.ndarray, pose: np
     root), keeping the iterate the clothing cost likes best, and that cost. The pose steps search
     at the work level; this brings each frame's pose to full resolution as the single fits' polish
     does."""
-    from scipy.optimize import least_squares
-
-    from studio.blas import one_blas_thread
-    from studio.fit.polish import FD_STEP
+    from studio.fit.polish import lsq_polish
 
     level = options.levels[-1]
     obj = ClothedObjective(model, frame.cameras, clothing_targets(frame, options), shape, 0, options.prior_weight,
                            floor=options.stands)
     lo, hi = pose_bounds(model, pose[:2], xy_margin=0.3)
-    x0 = np.clip(model.clip_pose(pose), lo, hi)
     scale = np.full(POSE_SIZE, 0.08)
     scale[:3] = 0.03
-    h = FD_STEP * scale
-    res, jac = clothing_residuals(obj, level)
-    best = {"x": x0, "cost": float(obj(x0[None], level)[0])}
-
-    def keep_best(intermediate_result):
-        c = float(obj(intermediate_result.x[None], level)[0])
-        if c < best["cost"]:
-            best.update(x=intermediate_result.x.copy(), cost=c)
-
-    one_blas_thread(least_squares)(res, x0, jac=lambda x: jac(x, np.where(x + h > hi, -h, h)),
-                                   bounds=(lo, hi), x_scale=scale, max_nfev=options.polish_iterations, method="trf",
-                                   xtol=1e-6, ftol=1e-6, callback=keep_best)
-    pose = model.clip_pose(best["x"])
-    return (stand_on_floor(model, shape, pose[None])[0] if options.stands else pose), best["cost"]
+    x, cost, _ = lsq_polish(obj, model.clip_pose(pose), (lo, hi), scale, level=level,
+                            max_nfev=options.polish_iterations, residuals=clothing_residuals(obj, level))
+    pose = model.clip_pose(x)
+    return (stand_on_floor(model, shape, pose[None])[0] if options.stands else pose), cost
 
 
 def _pose_unit(payload: dict) -> tuple[list, float]:

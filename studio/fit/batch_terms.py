@@ -87,83 +87,26 @@ def clothing_residuals(obj, level: int, l1: float | None = 1.0):
     by ``√λ_g`` (eq. 6.3 / 6.4) and divided by the square root of the view's sample count (of all
     regions under ``normalise="silhouette"``, of the region's under ``"region"``). With τ_g = τ and
     λ_g = 1 (tight clothing) these are the polish's residuals."""
-    import cv2
-    from scipy.spatial import cKDTree
-
-    from studio.cost.chamfer import _distance_to
-    from studio.fit.polish import OBSERVED_BAND, OBSERVED_STRIDE, VERTEX_STRIDE, _bilinear, _root
+    from studio.fit.polish import band_samples, contour_residuals
 
     target = obj.targets[level]
     sil = target.silhouettes
-    cams = obj._level_cams[level]
-    dts = [np.asarray(d, dtype=np.float64) for d in sil.distance_maps]
-    grads = [np.stack(np.gradient(d)[::-1], axis=-1) for d in dts]  # (H, W, 2): d/dx, d/dy
     taus = np.array([t / sil.scale for t in target.region_taus])
     roots = np.sqrt(np.asarray(target.region_weights, dtype=np.float64))
-    samples = []  # per view: (pixels (n, 2) x, y; rows, cols; τ per sample; weight per sample)
+    samples = []  # per view: pixels (n, 2) x, y; rows, cols; τ, weight and norm per sample
     for k, m in enumerate(sil.masks):
-        inner = _distance_to(~m, OBSERVED_BAND + 1, cv2.DIST_MASK_PRECISE)
-        keep = m & (inner <= OBSERVED_BAND)
-        grid = np.zeros_like(keep)
-        grid[::OBSERVED_STRIDE, ::OBSERVED_STRIDE] = True
-        r, c = np.nonzero(keep & grid)
+        pts, (r, c) = band_samples(m)
         region = np.full(len(r), -1)
         for g, masks in enumerate(target.region_masks):
             region[(region < 0) & masks[k][r, c]] = g
-        r, c, region = r[region >= 0], c[region >= 0], region[region >= 0]
+        inside = region >= 0
+        pts, r, c, region = pts[inside], r[inside], c[inside], region[inside]
         if target.normalise == "region":
             norm = np.sqrt(np.maximum(np.bincount(region, minlength=len(taus))[region], 1))
         else:
             norm = np.full(len(r), np.sqrt(max(len(r), 1)))
-        samples.append((np.stack([c, r], axis=1).astype(np.float64), (r, c), taus[region], roots[region] / norm))
-    sample = np.arange(0, obj.model.n_vertices, VERTEX_STRIDE)
-    n_v = len(sample)
-
-    def project(V):
-        flat = np.ascontiguousarray(V[:, sample]).reshape(-1, 3)
-        return [cam.project(flat).reshape(len(V), n_v, 2) for cam in cams]
-
-    def parts(V, uv):
-        out, nearest = [], []
-        masks = obj.masks(V, level)
-        for k, p in enumerate(uv):
-            pts, rc, tau, w = samples[k]
-            out.append(_root(_bilinear(dts[k], p), l1)[0] / np.sqrt(n_v))
-            if len(pts):
-                d, j = cKDTree(p).query(pts)
-                d = np.where(masks[k][rc], 0.0, np.minimum(d, tau))
-                out.append(w * _root(d, l1)[0])
-            else:
-                d, j = np.zeros(0), np.zeros(0, np.int64)
-            nearest.append((j, d))
-        return np.concatenate(out), nearest
-
-    def residuals(x):
-        V = obj.meshes(np.asarray(x, float)[None])
-        return parts(V[0], [u[0] for u in project(V)])[0]
-
-    def jacobian(x, h):
-        x = np.asarray(x, float)
-        X = np.repeat(x[None], len(x) + 1, axis=0)
-        X[1:] += np.diag(h)
-        V = obj.meshes(X)
-        uv = project(V)
-        _, nearest = parts(V[0], [u[0] for u in uv])
-        rows = []
-        for k, u in enumerate(uv):
-            du = (u[1:] - u[0]) / h[:, None, None]  # (D, V, 2) pixels per unit
-            g = _bilinear(grads[k][..., 0], u[0]), _bilinear(grads[k][..., 1], u[0])
-            slope = _root(_bilinear(dts[k], u[0]), l1)[1]
-            rows.append(((du[..., 0] * g[0] + du[..., 1] * g[1]) * slope / np.sqrt(n_v)).T)
-            j, d = nearest[k]
-            if len(j):
-                pts, _, tau, w = samples[k]
-                unit = (u[0][j] - pts) / np.maximum(d, 1e-9)[:, None]
-                slope = w * _root(d, l1)[1] * ((d > 0) & (d < tau))
-                rows.append(((du[:, j] * unit).sum(axis=-1) * slope).T)
-        return np.vstack(rows)
-
-    return residuals, jacobian
+        samples.append((pts, (r, c), taus[region], roots[region], norm))
+    return contour_residuals(obj, level, l1=l1, distance_maps=sil.distance_maps, samples=samples)
 
 
 def clothing_targets(frame: BatchFrame, options: BatchOptions) -> dict:

@@ -46,8 +46,12 @@ FAMILIES: dict[str, dict[str, tuple[float, ...]]] = {
     "hands_on_hips": {"upperarm_l": (0.15, 0.1, 0.5), "upperarm_r": (0.15, -0.1, -0.5),
                       "lowerarm_l": (1.3,), "lowerarm_r": (1.3,)},
     "arm_forward": {"upperarm_l": (-1.45, 0.5, 0.0), "upperarm_r": (0.0, -0.6, 0.0), "lowerarm_l": (-0.5,)},
-    "arms_crossed": {"upperarm_l": (-0.35, 0.7, 0.4), "upperarm_r": (-0.35, -0.7, -0.4),
-                     "lowerarm_l": (1.5,), "lowerarm_r": (1.5,)},
+    # the upper arms forward, out and turned in, so the flexed forearms cross in front of the
+    # chest: each hand ~55 mm past the midline (until this release (-0.35, ±0.7, ±0.4), elbows 1.5:
+    # turned out, the hands out beside the shoulders, 0.55 m apart, not crossed; kept as an extra
+    # "forearms up" family it took the crossed frames' starts, dev median 6.00 → 6.43 mm)
+    "arms_crossed": {"upperarm_l": (-0.3, 0.3, -0.9), "upperarm_r": (-0.3, -0.3, 0.9),
+                     "lowerarm_l": (1.1,), "lowerarm_r": (1.1,)},
     "wide_stance": {"upperleg_l": (0.0, -0.35, 0.0), "upperleg_r": (0.0, 0.35, 0.0),
                     "upperarm_l": (0.0, 0.4, 0.0), "upperarm_r": (0.0, -0.4, 0.0)},
     "half_squat": {"upperleg_l": (-1.1, -0.15, 0.0), "upperleg_r": (-1.1, 0.15, 0.0),

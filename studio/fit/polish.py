@@ -29,7 +29,7 @@ import numpy as np
 from studio.blas import one_blas_thread
 from studio.body.skeleton import POSE_SIZE
 
-__all__ = ["contour_residuals", "lsq_polish", "polish_frame", "shape_residuals"]
+__all__ = ["band_samples", "contour_residuals", "lsq_polish", "polish_frame", "shape_residuals"]
 
 #: Observed pixels within this many pixels of the observed outline (inside) enter the
 #: observed → model direction, every ``OBSERVED_STRIDE``-th row and column.
@@ -82,30 +82,46 @@ def shape_residuals(obj, weight: float, threshold: float):
     return residuals, jacobian
 
 
-def contour_residuals(obj, level: int = 0, balance: float = 1.0, l1: float | None = 1.0):
-    """(residuals, jacobian) of ``obj`` (a :class:`~studio.fit.objective.FrameObjective`) at
-    ``level``: ``residuals(x) -> (M,)``, ``jacobian(x, h) -> (M, D)`` (forward differences of
-    step ``h`` (D,)). See the module docstring for the residuals; ``balance`` weights the observed →
-    model direction against the other, ``l1`` is the smoothing of :func:`_root`."""
+def band_samples(mask: np.ndarray) -> tuple[np.ndarray, tuple[np.ndarray, np.ndarray]]:
+    """The observed → model samples of one view's observed mask (H, W): every ``OBSERVED_STRIDE``-th
+    row and column of its pixels within ``OBSERVED_BAND`` of its outline, as pixels (n, 2) (x, y)
+    and (rows, cols)."""
     import cv2
-    from scipy.spatial import cKDTree
 
     from studio.cost.chamfer import _distance_to
 
+    inner = _distance_to(~mask, OBSERVED_BAND + 1, cv2.DIST_MASK_PRECISE)  # same in every process
+    keep = mask & (inner <= OBSERVED_BAND)
+    grid = np.zeros_like(keep)
+    grid[::OBSERVED_STRIDE, ::OBSERVED_STRIDE] = True
+    r, c = np.nonzero(keep & grid)
+    return np.stack([c, r], axis=1).astype(np.float64), (r, c)
+
+
+def contour_residuals(obj, level: int = 0, balance: float = 1.0, l1: float | None = 1.0, *, distance_maps=None,
+                      samples=None):
+    """(residuals, jacobian) of ``obj`` (a :class:`~studio.fit.objective.FrameObjective`) at
+    ``level``: ``residuals(x) -> (M,)``, ``jacobian(x, h) -> (M, D)`` (forward differences of
+    step ``h`` (D,)). See the module docstring for the residuals; ``balance`` weights the observed →
+    model direction against the other, ``l1`` is the smoothing of :func:`_root`.
+
+    ``distance_maps`` (per view, level pixels; default the target's) and ``samples`` (per view
+    ``(pixels (n, 2), (rows, cols), τ, weight, norm)``, τ / weight / norm scalars or (n,): each
+    sample's residual is ``weight · root(min(d, τ)) / norm``; default :func:`band_samples` of the
+    target's masks with τ of the target, ``balance`` and the square root of the view's count) let
+    other costs of the same form use it (the clothing cost's regions,
+    :func:`studio.fit.batch_terms.clothing_residuals`)."""
+    from scipy.spatial import cKDTree
+
     target = obj.targets[level]
     cams = obj._level_cams[level]
-    tau = float(target.tau_level)
-    dts = [np.asarray(d, dtype=np.float64) for d in target.distance_maps]
+    if distance_maps is None:
+        distance_maps = target.distance_maps
+    if samples is None:
+        tau = float(target.tau_level)
+        samples = [(pts, rc, tau, balance, np.sqrt(len(pts))) for pts, rc in map(band_samples, target.masks)]
+    dts = [np.asarray(d, dtype=np.float64) for d in distance_maps]
     grads = [np.stack(np.gradient(d)[::-1], axis=-1) for d in dts]  # (H, W, 2): d/dx, d/dy
-    obs, obs_rc = [], []
-    for m in target.masks:
-        inner = _distance_to(~m, OBSERVED_BAND + 1, cv2.DIST_MASK_PRECISE)  # same in every process
-        keep = m & (inner <= OBSERVED_BAND)
-        grid = np.zeros_like(keep)
-        grid[::OBSERVED_STRIDE, ::OBSERVED_STRIDE] = True
-        r, c = np.nonzero(keep & grid)
-        obs.append(np.stack([c, r], axis=1).astype(np.float64))
-        obs_rc.append((r, c))
     sample = np.arange(0, obj.model.n_vertices, VERTEX_STRIDE)
     n_v = len(sample)
 
@@ -120,11 +136,12 @@ def contour_residuals(obj, level: int = 0, balance: float = 1.0, l1: float | Non
         out, nearest = [], []
         masks = obj.masks(V, level)
         for k, p in enumerate(uv):
+            pts, rc, tau, weight, norm = samples[k]
             fwd = _root(_bilinear(dts[k], p), l1)[0] / np.sqrt(n_v)
-            if len(obs[k]):
-                d, j = cKDTree(p).query(obs[k])
-                d = np.where(masks[k][obs_rc[k]], 0.0, np.minimum(d, tau))
-                bwd = balance * _root(d, l1)[0] / np.sqrt(len(obs[k]))
+            if len(pts):
+                d, j = cKDTree(p).query(pts)
+                d = np.where(masks[k][rc], 0.0, np.minimum(d, tau))
+                bwd = weight * _root(d, l1)[0] / norm
             else:
                 d, j, bwd = np.zeros(0), np.zeros(0, np.int64), np.zeros(0)
             out += [fwd, bwd]
@@ -150,10 +167,11 @@ def contour_residuals(obj, level: int = 0, balance: float = 1.0, l1: float | Non
             rows.append(((du[..., 0] * g[0] + du[..., 1] * g[1]) * slope / np.sqrt(n_v)).T)
             j, d = nearest[k]
             if len(j):
-                diff = u[0][j] - obs[k]  # nearest vertex − observed sample (n, 2)
+                pts, _, tau, weight, norm = samples[k]
+                diff = u[0][j] - pts  # nearest vertex − observed sample (n, 2)
                 unit = diff / np.maximum(d, 1e-9)[:, None]
                 slope = _root(d, l1)[1] * ((d > 0) & (d < tau))
-                rows.append((balance * (du[:, j] * unit).sum(axis=-1) * slope / np.sqrt(len(j))).T)
+                rows.append((weight * (du[:, j] * unit).sum(axis=-1) * slope / norm).T)
         return np.vstack(rows)
 
     return residuals, jacobian
@@ -161,7 +179,8 @@ def contour_residuals(obj, level: int = 0, balance: float = 1.0, l1: float | Non
 
 @one_blas_thread  # the trust region's SVD of a ~18000 × 40 Jacobian: 0.06 s on one thread, 0.2–0.5 s on two
 def lsq_polish(obj, x0, bounds, scale, *, level: int = 0, max_nfev: int = 12, balance: float = 1.0,
-               l1: float | None = 1.0, shape_prior: tuple[float, float] | None = None) -> tuple[np.ndarray, float, dict]:
+               l1: float | None = 1.0, shape_prior: tuple[float, float] | None = None,
+               residuals=None) -> tuple[np.ndarray, float, dict]:
     """Trust-region least squares (``trf``, at most ``max_nfev`` iterations) on
     :func:`contour_residuals` from ``x0`` within ``bounds`` = (lo, hi), ``x_scale=scale`` (D,)
     (the parameters' typical steps; the Jacobian's step is ``FD_STEP`` of them). Returns the
@@ -169,12 +188,14 @@ def lsq_polish(obj, x0, bounds, scale, *, level: int = 0, max_nfev: int = 12, ba
     that cost, and a record: ``cost_before``, ``costs`` (every iterate's), ``nfev``, ``njev``.
     ``l1``: the smoothing of :func:`_root` (None: squared distances); ``balance``: the weight of
     the observed → model direction; ``shape_prior``: (weight, threshold σ) of
-    :func:`shape_residuals` appended to the residuals (None: none)."""
+    :func:`shape_residuals` appended to the residuals (None: none); ``residuals``: another
+    (residuals, jacobian) pair of the form of :func:`contour_residuals` in its place (the batch's
+    clothing stand-in, :func:`studio.fit.batch.pose_polish`)."""
     from scipy.optimize import least_squares
 
     lo, hi = (np.asarray(b, float) for b in bounds)
     x0 = np.clip(np.asarray(x0, float), lo, hi)
-    res, jac = contour_residuals(obj, level, balance, l1)
+    res, jac = contour_residuals(obj, level, balance, l1) if residuals is None else residuals
     h = FD_STEP * np.asarray(scale, float)
     if shape_prior is not None and shape_prior[0] > 0 and obj.n_shape_free:
         sres, sjac = shape_residuals(obj, *shape_prior)

@@ -20,7 +20,7 @@ def test_arm_states_hold_the_library_arms(model):
     left, right = (np.round(states[g][:, :4], 2).tolist() for g in (0, 1))
     assert [-1.45, 0.5, 0.0, -0.5] in left  # arm_forward's left arm
     assert [-1.45, -0.5, 0.0, -0.5] in right  # and its mirror image
-    assert [-0.35, 0.7, 0.4, 1.5] in left and [-0.35, -0.7, -0.4, 1.5] in right  # arms crossed
+    assert [-0.3, 0.3, -0.9, 1.1] in left and [-0.3, -0.3, 0.9, 1.1] in right  # arms crossed
 
 
 def test_extra_starts_leave_a_local_minimum():

@@ -225,3 +225,20 @@ def test_frontal_twin_is_the_body_reflected_through_its_frontal_plane(model, fam
     assert np.abs(V - Vt).max() > 0.1  # a different body, not the pose itself
     np.testing.assert_allclose(model.joints(shape, twin)[0], pelvis, atol=1e-5)
     np.testing.assert_allclose(frontal_twin(model, shape, twin), pose, atol=1e-9)
+
+
+def test_arms_crossed_crosses_the_forearms_in_front_of_the_chest(model):
+    """The library's arms crossed (issue 13): each hand past the body's midline, in front of the
+    torso at chest height, the elbows out beside it. Until the fix the upper arms were turned
+    out and the hands sat beside the shoulders, 0.55 m apart (left hand +274 mm): the family
+    every arms-crossed frame started from was not arms crossed."""
+    shape = np.zeros(len(model.eigenvalues))
+    pose = family_pose(model, "arms_crossed").copy()
+    pose[:6] = 0.0  # facing -y, the body's left at +x
+    V, J = model.vertices(shape, pose), model.joints(shape, pose)
+    hand_l, hand_r = (V[model.parts == model.part_names.index(p)].mean(axis=0) - J[0] for p in ("hand_l", "hand_r"))
+    elbow_l = J[model.part_names.index("lowerarm_l")] - J[0]
+    assert -0.12 < hand_l[0] < -0.02 and 0.02 < hand_r[0] < 0.12  # crossed: past the midline, not far
+    assert hand_l[1] < -0.2 and hand_r[1] < -0.2  # in front of the torso
+    assert 0.35 < hand_l[2] < 0.55 and 0.35 < hand_r[2] < 0.55  # chest height above the pelvis
+    assert elbow_l[0] > 0.12  # the elbow out at the side

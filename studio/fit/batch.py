@@ -218,15 +218,14 @@ def pose_polish(model: BodyModel, frame: BatchFrame, shape: np.ndarray, pose: np
     root), keeping the iterate the clothing cost likes best, and that cost. The pose steps search
     at the work level; this brings each frame's pose to full resolution as the single fits' polish
     does."""
+    from studio.fit.frame import _parameter_box
     from studio.fit.polish import lsq_polish
 
     level = options.levels[-1]
     obj = ClothedObjective(model, frame.cameras, clothing_targets(frame, options), shape, 0, options.prior_weight,
                            floor=options.stands)
-    lo, hi = pose_bounds(model, pose[:2], xy_margin=0.3)
-    scale = np.full(POSE_SIZE, 0.08)
-    scale[:3] = 0.03
-    x, cost, _ = lsq_polish(obj, model.clip_pose(pose), (lo, hi), scale, level=level,
+    box, scale = _parameter_box(model, *pose_bounds(model, pose[:2], xy_margin=0.3), 0)
+    x, cost, _ = lsq_polish(obj, model.clip_pose(pose), box, scale, level=level,
                             max_nfev=options.polish_iterations, residuals=clothing_residuals(obj, level))
     pose = model.clip_pose(x)
     return (stand_on_floor(model, shape, pose[None])[0] if options.stands else pose), cost

@@ -171,7 +171,7 @@ class SilhouetteTarget:
             OpenCV distance mask.
         ignore : sequence of (H, W) bool or None, optional
             Per view, observed pixels the model need not explain — e.g. a stool under a
-            seated person (:func:`studio.fit.props.support_masks`): left out of the
+            seated person (:func:`studio.fit.props.find_support`): left out of the
             observed-to-model direction, still inside the silhouette for the model-to-observed
             one (the model may cover them; a prop can hide the body).
         """

@@ -171,6 +171,7 @@ def fit_frame(
     light_uncertainty: dict | None = None,
     _attempt: int = 0,
     _avoid: tuple[str, ...] = (),
+    _own_statures: bool = False,
 ) -> FrameFit:
     """Fit ``model`` to one frame's observed silhouettes.
 
@@ -266,12 +267,27 @@ def fit_frame(
         grid, _ = initial_poses(pose_obj, cameras, masks, search, keep=None, xy=xy)
         starts = grid[:4]
         if match is not None:  # the library's shortlist, scored by the silhouette cost (eq. 4.6)
-            cand = stand_on_floor(model, base_shape, match["poses"])
-            X = np.stack([pose_obj.pack(base_shape, p) for p in cand])
-            families = list(match["families"])
+            poses, families, statures = match["poses"], list(match["families"]), np.asarray(match["statures"])
             keep = [i for i, f in enumerate(families) if f not in _avoid]
             if len(keep) < len(families) and keep:  # a retry: the postures the last attempt started from are left out
-                X, families = X[keep], [families[i] for i in keep]
+                poses, families, statures = poses[keep], [families[i] for i in keep], statures[keep]
+            if _own_statures and init_height is not None and shape is None:
+                # the last resort of a flagged frame: each candidate scored at the stature the
+                # library matched it at (otherwise all on the best match's body): a squat matched at
+                # full scale, scored on the short body of a standing posture matched at 0.88, had
+                # cost 22.4 against its own 12.6 and never started the search (dev half squat: 33.5
+                # → 6.6 mm). Not on the first attempt or the retry: the coarse level's cost compares
+                # statures poorly (held out, on every frame: 8 fits closer, 5 farther, a walk's cost
+                # 0.24 → 0.74; on the retry: a torso twist 8 → 33 mm)
+                own, n_own = _costs_at_statures(model, cameras, targets, poses, statures, search, options, shadow)
+                n_early += n_own
+                if statures[np.argmin(own)] != init_height:
+                    n_early += pose_obj.n_evaluations + (apf_obj.n_evaluations if apf_obj is not pose_obj else 0)
+                    init_height = float(statures[np.argmin(own)])
+                    base_shape = stature_shape(model, init_height)
+                    pose_obj, apf_obj = objectives(targets)
+            cand = stand_on_floor(model, base_shape, poses)
+            X = np.stack([pose_obj.pack(base_shape, p) for p in cand])
             if len(cameras) == 1:  # one view: the heading grid's strides compete with the library's postures
                 X, families = np.vstack([X, grid]), families + ["stride"] * len(grid)
             order = np.argsort(pose_obj(X, search))[:4]
@@ -415,8 +431,8 @@ def fit_frame(
     shape_out, pose_out = shapes[0], model.clip_pose(poses[0])
     costs = obj.terms(obj.pack(shape_out, pose_out), final)
     t = time.perf_counter()
-    body_masks = masks if support is None else [m & ~i for m, i in zip(masks, support.ignore, strict=True)]
-    quality = fit_quality(model, cameras, body_masks, shape_out, pose_out, costs, screen)
+    quality = fit_quality(model, cameras, masks, shape_out, pose_out, costs, screen,
+                          ignore=None if support is None else support.ignore)
     if support is not None:
         quality["support"] = support.to_json([c.name for c in cameras])
     timings["quality"] = time.perf_counter() - t
@@ -454,7 +470,30 @@ def fit_frame(
                           shadow_masks=shadow_masks, shadow_weight=shadow_weight, ground=ground,
                           light_uncertainty=light_uncertainty, _attempt=_attempt + 1, _avoid=avoid)
         fit = _keep_best(fit, again)
+        if (_attempt == 0 and len(cameras) > 1 and match is not None and shape is None
+                and _explains_poorly(fit.quality)):
+            # flagged again: once more from the library's other postures, each at its own stature
+            avoid += tuple(f for f in (again.costs.get("start_family"),) if f is not None)
+            last = fit_frame(model, given[0], given[1], frame=frame, hint_pose=hint_pose, options=options,
+                             seed=np.random.default_rng(seed).integers(2**31, size=2)[1], screen=screen, lights=lights,
+                             shadow_masks=shadow_masks, shadow_weight=shadow_weight, ground=ground,
+                             light_uncertainty=light_uncertainty, _attempt=retries, _avoid=avoid,
+                             _own_statures=True)
+            fit = _keep_best(fit, last)
     return fit
+
+
+def _costs_at_statures(model, cameras, targets, poses, statures, level, options, shadow) -> tuple[np.ndarray, int]:
+    """(cost (N,) of each pose at pyramid ``level``, posed on the shape of its own stature
+    (:func:`stature_shape`) and stood on the floor; the evaluations spent)."""
+    cost, n = np.empty(len(poses)), 0
+    for h in np.unique(statures):
+        sel = statures == h
+        s_h = stature_shape(model, h)
+        obj = FrameObjective(model, cameras, targets, s_h, 0, options.prior_weight, shadow=shadow)
+        cost[sel] = obj(np.stack([obj.pack(s_h, p) for p in stand_on_floor(model, s_h, poses[sel])]), level)
+        n += obj.n_evaluations
+    return cost, n
 
 
 def _parameter_box(model, lo: np.ndarray, hi: np.ndarray, n_free: int) -> tuple[tuple[np.ndarray, np.ndarray], np.ndarray]:

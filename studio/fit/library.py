@@ -306,9 +306,9 @@ def library_match(model, cameras, masks, xy, *, shape=None, scales=SCALES, n_hea
     (one view leaves the depth along its rays open).
 
     Returns ``{"poses": (shortlist, POSE_SIZE) with the heading and the floor point set (root
-    height 0: see :func:`stand_on_floor`), "families", "scales", "scores", "stature", "xy"}``
-    best first; ``stature`` (m) is the best candidate's scale × the library body's stature,
-    ``xy`` its floor point.
+    height 0: see :func:`stand_on_floor`), "families", "scales", "scores", "statures", "stature",
+    "xy"}`` best first; ``statures`` (m) are each candidate's scale × the library body's stature,
+    ``stature`` the best candidate's, ``xy`` its floor point.
 
     ``n_points`` vertices per body: with 400 the "silhouette cells no point reaches" share was
     mostly sampling noise. Measured on the *dev* people of ``benchmarks/pose_accuracy.py``
@@ -354,7 +354,8 @@ def library_match(model, cameras, masks, xy, *, shape=None, scales=SCALES, n_hea
         pose[:2] = xys[q] + (Rz[:2, :2] @ pelvis[p]) * scales[s]
         out.append(pose)
     return {"poses": np.asarray(out), "families": [names[p] for p in p_idx], "scales": scales[s_idx].tolist(),
-            "scores": scores[x_idx, ps_idx, h_idx].tolist(), "stature": float(scales[s_idx[0]] * stature),
+            "scores": scores[x_idx, ps_idx, h_idx].tolist(), "statures": (scales[s_idx] * stature).tolist(),
+            "stature": float(scales[s_idx[0]] * stature),
             "xy": xys[x_idx[0]].copy()}
 
 

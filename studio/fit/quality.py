@@ -332,10 +332,12 @@ def refused_quality(screen: dict) -> dict:
 
 # --------------------------------------------------------------------------- the fitted frame
 def fit_quality(model, cameras, masks, shape, pose, costs: dict, screen: dict | None = None,
-                measurements: dict | None = None) -> dict:
+                measurements: dict | None = None, ignore=None) -> dict:
     """The ``quality`` object of a fitted frame (format in the module doc): silhouette agreement
     with the observed ``masks``, cost per view, shape σ, population z-scores, the segmentation
-    ``screen`` (:func:`screen_masks`, computed when None), ``reasons`` and ``status``."""
+    ``screen`` (:func:`screen_masks`, computed when None), ``reasons`` and ``status``.
+    ``ignore``: per view, pixels the agreement leaves out, in the masks and in the body's
+    silhouettes alike — the cost's don't-care region (a prop, :func:`studio.fit.props.find_support`)."""
     from studio.body import measure
     from studio.fit.evaluate import silhouette_agreement
     from studio.render import silhouette
@@ -344,6 +346,9 @@ def fit_quality(model, cameras, masks, shape, pose, costs: dict, screen: dict | 
     reasons: list[Reason] = []
     V = model.vertices(shape, pose)
     sils = [silhouette(cam, V, model.faces) for cam in cameras]
+    if ignore is not None:
+        sils = [s & ~i for s, i in zip(sils, ignore, strict=True)]
+        masks = [np.asarray(m, dtype=bool) & ~i for m, i in zip(masks, ignore, strict=True)]
     per_view = {}
     for cam, sil, obs in zip(cameras, sils, masks, strict=True):
         p, r = silhouette_agreement([sil], [obs])

@@ -93,8 +93,9 @@ def test_fit_is_deterministic_under_a_seed(scene):
 
 def test_a_fit_of_several_views_explaining_them_poorly_is_searched_again_from_other_postures(scene):
     """A frame of several views whose fitted body the agreement gates flag is searched again with
-    other draws, the library posture the first attempt started from left out; the lower total
-    cost is kept, both attempts' costs and CPU recorded."""
+    other draws, the library posture the first attempt started from left out; flagged still, a
+    third time without either start, the library's candidates each scored at its own stature;
+    the lowest total cost is kept, every attempt's cost and CPU recorded."""
     from dataclasses import replace
 
     from studio.fit.frame import _explains_poorly
@@ -110,9 +111,15 @@ def test_a_fit_of_several_views_explaining_them_poorly_is_searched_again_from_ot
     again = fit_frame(model, cams, masks, options=tiny, seed=np.random.default_rng(3).integers(2**31),
                       _attempt=1, _avoid=(first,))
     assert again.costs["start_family"] != first
+    kept = min(once, again, key=lambda f: f.costs["total"])
+    assert _explains_poorly(kept.quality)  # so a third attempt follows
+    last = fit_frame(model, cams, masks, options=tiny, seed=np.random.default_rng(3).integers(2**31, size=2)[1],
+                     _attempt=1, _avoid=(first, again.costs["start_family"]), _own_statures=True)
+    assert last.costs["start_family"] not in (first, again.costs["start_family"])
     fit = fit_frame(model, cams, masks, options=replace(tiny, retries=1), seed=3)
-    np.testing.assert_allclose(fit.costs["attempt_costs"], [once.costs["total"], again.costs["total"]], rtol=1e-12)
-    assert fit.costs["total"] == min(once.costs["total"], again.costs["total"])
+    tries = [once.costs["total"], again.costs["total"], last.costs["total"]]
+    np.testing.assert_allclose(fit.costs["attempt_costs"], tries, rtol=1e-12)
+    assert fit.costs["total"] == min(tries)
     assert fit.timings["cpu_all_attempts"] > fit.timings["cpu"] > 0
     assert fit.timings["all_attempts"] > fit.timings["total"] > 0
 

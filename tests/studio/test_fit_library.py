@@ -178,6 +178,18 @@ def test_shadow_views_equal_a_plain_reference(model):
                                                              "masks": shadows})
 
 
+def _squat_180(model):
+    """(cameras, shape, pose, masks) of a 1.80 m body in a half squat, turned and on the floor."""
+    from studio.fit.init import stature_shape
+
+    cams = ring_cameras()
+    shape = stature_shape(model, 1.80)
+    pose = family_pose(model, "half_squat")
+    pose[:2], pose[5] = [0.1, 0.05], 0.6
+    pose = stand_on_floor(model, shape, pose[None])[0]
+    return cams, shape, pose, [silhouette(c, model.vertices(shape, pose), model.faces) for c in cams]
+
+
 def test_stature_search_recovers_a_squat_stature(model):
     """A half squat of a 1.80 m body started 6 % short (one step of the library's scale grid):
     the stature search with the true posture lands within 1.5 % (one of its steps) — the cost
@@ -187,18 +199,36 @@ def test_stature_search_recovers_a_squat_stature(model):
     from studio.fit.init import stature_search, stature_shape
     from studio.fit.objective import FrameObjective
 
-    cams = ring_cameras()
-    shape = stature_shape(model, 1.80)
-    pose = family_pose(model, "half_squat")
-    pose[:2], pose[5] = [0.1, 0.05], 0.6
-    pose = stand_on_floor(model, shape, pose[None])[0]
-    masks = [silhouette(c, model.vertices(shape, pose), model.faces) for c in cams]
+    cams, shape, pose, masks = _squat_180(model)
     targets = build_targets(masks, [c.name for c in cams], FitOptions(levels=(1, 1, 1)))
     start = 1.80 * 0.94
     height, found = stature_search(model, lambda s: FrameObjective(model, cams, targets, s, 0), pose, start, 1)
     assert abs(height - 1.80) <= 0.016 * 1.80
     np.testing.assert_allclose(found, stature_shape(model, height))
     assert abs(start - 1.80) > 0.1  # the start itself was 10 cm off
+
+
+def test_shortlist_candidates_are_scored_at_their_own_stature(model):
+    """The library matches each candidate at its own scale (``statures``); a retry scores each
+    on a body of that stature. A squat of a 1.80 m body scored on the body of a standing match
+    at 0.88 of it costs far more than on its own (dev half squat: 22.4 against 12.6, so the
+    squat never started the search)."""
+    from studio.fit import FitOptions
+    from studio.fit.frame import _costs_at_statures, build_targets
+    from studio.fit.init import hull_centroid
+    from studio.fit.objective import FrameObjective
+
+    cams, shape, pose, masks = _squat_180(model)
+    m = library_match(model, cams, masks, hull_centroid(cams, masks))
+    assert m["statures"][0] == m["stature"]
+    ratio = np.asarray(m["statures"]) / np.asarray(m["scales"])
+    np.testing.assert_allclose(ratio, ratio[0])  # one library body, scaled
+    targets = build_targets(masks, [c.name for c in cams], FitOptions(levels=(1, 1, 1)))
+    poses = np.stack([pose, pose])
+    own, n = _costs_at_statures(model, cams, targets, poses, np.array([1.80, 0.88 * 1.80]), 1, FitOptions(), None)
+    obj = FrameObjective(model, cams, targets, shape, 0)
+    assert own[0] == pytest.approx(float(obj(obj.pack(shape, pose)[None], 1)[0]), rel=1e-9)
+    assert own[0] < 0.25 * own[1] and n == 2
 
 
 @pytest.mark.parametrize("family", ["a_pose", "walk", "arms_crossed"])

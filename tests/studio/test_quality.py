@@ -122,6 +122,25 @@ def test_agreement_gate_at_its_threshold(scene):
     assert seen == {None, "suspect", "failed"}  # both sides of both thresholds were crossed
 
 
+def test_ignored_pixels_count_neither_way(scene):
+    """The cost's don't-care region (a prop) is left out of the agreement on both sides: the
+    body's lower half ignored and the masks' lower half emptied (as a stool would be seen) is
+    still a perfect fit, while without ``ignore`` the body's own lower half reads as extra."""
+    model, cams, shape, pose, V, masks = scene
+    costs = {"silhouette_per_view": {c.name: 0.1 for c in cams}}
+    lower = []
+    for m in masks:
+        ys = np.nonzero(m)[0]
+        low = np.zeros_like(m)
+        low[(ys.min() + ys.max()) // 2:] = True
+        lower.append(low)
+    cut = [m & ~lo for m, lo in zip(masks, lower)]
+    q = fit_quality(model, cams, cut, shape, pose, costs, screen_masks(cams, masks), ignore=lower)
+    assert q["silhouette_precision"] > 0.99 and q["silhouette_recall"] > 0.99 and q["status"] == "ok", q["reasons"]
+    plain = fit_quality(model, cams, cut, shape, pose, costs, screen_masks(cams, masks))
+    assert plain["silhouette_precision"] < 0.7 and "agreement" in _checks(plain)
+
+
 def test_stray_blobs_are_flagged(scene):
     model, cams, shape, pose, V, masks = scene
     blobs = list(masks)

@@ -211,6 +211,7 @@ def _fit_one(job: dict) -> dict:
             "precision": prec, "recall": rec, "time_s": dt, "cpu_s": fit.timings.get("cpu"),
             "cpu_all_s": fit.timings.get("cpu_all_attempts", fit.timings.get("cpu")),
             "start_family": fit.costs.get("start_family"), "cost": fit.costs["total"],
+            "attempt_costs": fit.costs.get("attempt_costs", [fit.costs["total"]]),
             # what the quality gates saw, and the fitted body (to study the gates without refitting)
             "quality": fit.quality, "shape": fit.shape.tolist(), "pose": fit.pose.tolist()}
 

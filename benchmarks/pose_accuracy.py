@@ -61,6 +61,7 @@ within 10 mm for standing families; precision and recall ≥ 0.97; ≥ 95 % of f
 from __future__ import annotations
 
 import argparse
+import functools
 import json
 import sys
 import time
@@ -278,10 +279,7 @@ def _rows(variant: str, split: str = "held-out") -> list[dict]:
     return [json.loads(p.read_text()) for p in sorted((bench_root(split) / "results" / variant).glob("*.json"))]
 
 
-#: the quality gates' checks of the fitted body; every other reason is the input's (the segmentation screen)
-FIT_CHECKS = ("agreement", "view_agreement", "shape_prior", "population")
-
-
+@functools.lru_cache(maxsize=None)
 def true_population_z(person: str, split: str = "held-out") -> float | None:
     """Largest |z| of a person's true stature, mass and girths against ANSUR II (the quality
     gates' population check, :func:`studio.fit.quality.population_z`); None if not rendered."""
@@ -308,7 +306,8 @@ def is_clean(row: dict, true_z: float | None) -> bool | None:
 
     if true_z is None:
         return None
-    return true_z <= POPULATION_Z[0] and not any(r["check"] not in FIT_CHECKS for r in row.get("reasons", []))
+    screened = row.get("quality", {}).get("segmentation_status", row["status"])  # refused frames: no quality
+    return true_z <= POPULATION_Z[0] and screened == "ok"
 
 
 def summarise(rows: list[dict], split: str = "held-out") -> dict:

@@ -14,11 +14,12 @@
 from studio.fit.batch import BatchFrame, BatchOptions, BatchResult, batch_fit
 from studio.fit.batch_session import fit_batch_session, load_batch
 from studio.fit.errors import FitError, UnusableFrame
-from studio.fit.frame import FitOptions, FrameFit, fit_frame, fit_frame_gender
+from studio.fit.frame import FitOptions, fit_frame, fit_frame_gender
 from studio.fit.init import hull_centroid, initial_poses
 from studio.fit.objective import FrameObjective, pose_bounds
 from studio.fit.output import OVERLAY_COLORS, overlay_image, write_frame_fit
 from studio.fit.quality import fit_quality, screen_masks
+from studio.fit.result import FrameFit
 from studio.fit.session import fit_session, load_fits, load_quality, open_workspace
 
 __all__ = [

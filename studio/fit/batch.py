@@ -43,7 +43,7 @@ from studio.fit.batch_gender import GENDER_PRIOR_WEIGHT, gender_scores, stature_
 from studio.fit.batch_terms import ClothedObjective, clothing_residuals, clothing_targets, on_floor
 from studio.fit.errors import FitError
 from studio.fit.library import stand_on_floor
-from studio.fit.objective import pose_bounds
+from studio.fit.objective import parameter_box, pose_bounds
 from studio.optimize import Stage, staged_nelder_mead
 
 __all__ = ["BatchFrame", "BatchOptions", "BatchResult", "ClothedObjective", "batch_fit", "compare_genders",
@@ -218,13 +218,12 @@ def pose_polish(model: BodyModel, frame: BatchFrame, shape: np.ndarray, pose: np
     root), keeping the iterate the clothing cost likes best, and that cost. The pose steps search
     at the work level; this brings each frame's pose to full resolution as the single fits' polish
     does."""
-    from studio.fit.frame import _parameter_box
     from studio.fit.polish import lsq_polish
 
     level = options.levels[-1]
     obj = ClothedObjective(model, frame.cameras, clothing_targets(frame, options), shape, 0, options.prior_weight,
                            floor=options.stands)
-    box, scale = _parameter_box(model, *pose_bounds(model, pose[:2], xy_margin=0.3), 0)
+    box, scale = parameter_box(model, *pose_bounds(model, pose[:2], xy_margin=0.3), 0)
     x, cost, _ = lsq_polish(obj, model.clip_pose(pose), box, scale, level=level,
                             max_nfev=options.polish_iterations, residuals=clothing_residuals(obj, level))
     pose = model.clip_pose(x)

@@ -46,8 +46,6 @@ from __future__ import annotations
 
 import logging
 import time
-from dataclasses import dataclass, field
-
 import numpy as np
 
 from studio.blas import one_blas_thread
@@ -55,13 +53,14 @@ from studio.body import BodyModel
 from studio.body.skeleton import POSE_SIZE
 from studio.cost import SilhouetteTarget
 from studio.fit.errors import FitError, UnusableFrame
-from studio.fit.init import hull_centroid, hull_height, initial_poses, stature_search, stature_shape
+from studio.fit.init import costs_at_statures, hull_centroid, hull_height, initial_poses, stature_search, stature_shape
 from studio.fit.library import frontal_twin, library_match, stand_on_floor
-from studio.fit.objective import CylinderObjective, FrameObjective, pose_bounds
+from studio.fit.objective import CylinderObjective, FrameObjective, parameter_box, pose_bounds
 from studio.fit.options import FitOptions
 from studio.fit.polish import polish_frame
 from studio.fit.props import find_support
 from studio.fit.quality import fit_quality, refused_quality, screen_masks
+from studio.fit.result import FrameFit, explains_poorly, keep_best
 from studio.fit.search import _arm_states, _heading, _part_groups, _partitioned_search, _partitions, _pose_sigma
 from studio.optimize import Stage, annealed_particle_filter, staged_nelder_mead, thesis_stages
 
@@ -91,57 +90,6 @@ MONOCULAR_RETRIES = 1
 RETRY_SHORTLIST = 24
 #: Library families whose start looks for a seat before the search (:func:`studio.fit.props.find_support`).
 SEATED_STARTS = ("seated",)
-
-
-@dataclass(frozen=True, eq=False)
-class FrameFit:
-    """Result of one frame: ``shape`` (n_shape,), ``pose`` (POSE_SIZE,), ``joints`` (15, 3),
-    ``costs`` term by term at full resolution, ``timings`` (s) per step, ``quality`` the
-    quality gates' object (:func:`studio.fit.quality.fit_quality`; ``status`` ok / suspect /
-    failed with the reasons)."""
-
-    frame: int
-    gender: str
-    shape: np.ndarray
-    pose: np.ndarray
-    joints: np.ndarray
-    costs: dict
-    timings: dict
-    n_evaluations: int
-    settings: dict = field(default_factory=dict)
-    quality: dict = field(default_factory=dict)
-
-    @property
-    def status(self) -> str:
-        """``ok``, ``suspect`` or ``failed`` (``unchecked`` for results written before the gates)."""
-        return self.quality.get("status", "unchecked")
-
-    def to_json(self) -> dict:
-        return {
-            "format": "studio.fit",
-            "version": 1,
-            "frame": int(self.frame),
-            "gender": self.gender,
-            "shape": [float(v) for v in self.shape],
-            "pose": [float(v) for v in self.pose],
-            "joints": np.round(self.joints, 6).tolist(),
-            "costs": self.costs,
-            "timings": self.timings,
-            "n_evaluations": int(self.n_evaluations),
-            "settings": self.settings,
-            "quality": self.quality,
-        }
-
-    @classmethod
-    def from_json(cls, obj: dict) -> "FrameFit":
-        if obj.get("format") != "studio.fit" or int(obj.get("version", 0)) != 1:
-            raise FitError(f"not a studio.fit version 1 result (format={obj.get('format')!r}, version={obj.get('version')!r})")
-        return cls(
-            frame=int(obj["frame"]), gender=obj["gender"], shape=np.asarray(obj["shape"], float),
-            pose=np.asarray(obj["pose"], float), joints=np.asarray(obj["joints"], float), costs=obj["costs"],
-            timings=obj["timings"], n_evaluations=int(obj["n_evaluations"]), settings=obj.get("settings", {}),
-            quality=obj.get("quality") or {},
-        )
 
 
 def build_targets(masks, names, options: FitOptions, ignore=None) -> dict:
@@ -279,7 +227,9 @@ def fit_frame(
                 # → 6.6 mm). Not on the first attempt or the retry: the coarse level's cost compares
                 # statures poorly (held out, on every frame: 8 fits closer, 5 farther, a walk's cost
                 # 0.24 → 0.74; on the retry: a torso twist 8 → 33 mm)
-                own, n_own = _costs_at_statures(model, cameras, targets, poses, statures, search, options, shadow)
+                own, n_own = costs_at_statures(
+                    model, lambda s: FrameObjective(model, cameras, targets, s, 0, options.prior_weight, shadow=shadow),
+                    poses, statures, search)
                 n_early += n_own
                 if statures[np.argmin(own)] != init_height:
                     n_early += pose_obj.n_evaluations + (apf_obj.n_evaluations if apf_obj is not pose_obj else 0)
@@ -376,7 +326,7 @@ def fit_frame(
     obj = FrameObjective(model, cameras, targets, base_shape, n_free, options.prior_weight, shadow=shadow)
     x0 = obj.pack(base_shape, x_pose)
     sig = np.sqrt(model.eigenvalues[:n_free])
-    (blo, bhi), step = _parameter_box(model, lo, hi, n_free)
+    (blo, bhi), step = parameter_box(model, lo, hi, n_free)
     shape_idx = list(range(POSE_SIZE, POSE_SIZE + n_free))
     stages = thesis_stages(list(range(6)), _part_groups(), shape_idx, n_shape_first=min(6, n_free),
                            n_shape_second=n_free, max_evaluations=options.nm_evaluations)
@@ -410,7 +360,7 @@ def fit_frame(
         # kept: a body facing the wrong way explains the silhouettes nearly as well, and no local
         # search turns it round
         n_polish = min(max(options.polish_shape_free, n_free), model.n_shape) if n_free else 0
-        box, pstep = _parameter_box(model, lo, hi, n_polish)
+        box, pstep = parameter_box(model, lo, hi, n_polish)
         twin = ((lambda s, p: frontal_twin(model, s, model.clip_pose(p)))
                 if options.frontal_twin and previous_pose is None else None)
         obj, x_nm, polish, twin_costs, n_copy = polish_frame(obj, x_nm, box, pstep, level=final,
@@ -460,7 +410,7 @@ def fit_frame(
         quality=quality,
     )
     retries = MONOCULAR_RETRIES if len(cameras) == 1 else options.retries
-    if previous_pose is None and _attempt < retries and _explains_poorly(quality):
+    if previous_pose is None and _attempt < retries and explains_poorly(quality):
         # a body that explains the silhouettes poorly is searched again with other random draws
         # (several views: from the library's other postures too) and the lower total cost is kept
         log.info("frame %d: the fitted body explains its views poorly: searching again", frame)
@@ -469,9 +419,9 @@ def fit_frame(
                           seed=np.random.default_rng(seed).integers(2**31), screen=screen, lights=lights,
                           shadow_masks=shadow_masks, shadow_weight=shadow_weight, ground=ground,
                           light_uncertainty=light_uncertainty, _attempt=_attempt + 1, _avoid=avoid)
-        fit = _keep_best(fit, again)
+        fit = keep_best(fit, again)
         if (_attempt == 0 and len(cameras) > 1 and match is not None and shape is None
-                and _explains_poorly(fit.quality)):
+                and explains_poorly(fit.quality)):
             # flagged again: once more from the library's other postures, each at its own stature
             avoid += tuple(f for f in (again.costs.get("start_family"),) if f is not None)
             last = fit_frame(model, given[0], given[1], frame=frame, hint_pose=hint_pose, options=options,
@@ -479,48 +429,8 @@ def fit_frame(
                              shadow_masks=shadow_masks, shadow_weight=shadow_weight, ground=ground,
                              light_uncertainty=light_uncertainty, _attempt=retries, _avoid=avoid,
                              _own_statures=True)
-            fit = _keep_best(fit, last)
+            fit = keep_best(fit, last)
     return fit
-
-
-def _costs_at_statures(model, cameras, targets, poses, statures, level, options, shadow) -> tuple[np.ndarray, int]:
-    """(cost (N,) of each pose at pyramid ``level``, posed on the shape of its own stature
-    (:func:`stature_shape`) and stood on the floor; the evaluations spent)."""
-    cost, n = np.empty(len(poses)), 0
-    for h in np.unique(statures):
-        sel = statures == h
-        s_h = stature_shape(model, h)
-        obj = FrameObjective(model, cameras, targets, s_h, 0, options.prior_weight, shadow=shadow)
-        cost[sel] = obj(np.stack([obj.pack(s_h, p) for p in stand_on_floor(model, s_h, poses[sel])]), level)
-        n += obj.n_evaluations
-    return cost, n
-
-
-def _parameter_box(model, lo: np.ndarray, hi: np.ndarray, n_free: int) -> tuple[tuple[np.ndarray, np.ndarray], np.ndarray]:
-    """((lower, upper) bounds, typical steps) of a pose + ``n_free`` shape vector: the pose
-    bounds ``lo`` / ``hi`` and ±3 σ of the shape; steps 0.08 rad, 3 cm at the root, σ / 2."""
-    sig = np.sqrt(model.eigenvalues[:n_free])
-    step = np.concatenate([np.full(POSE_SIZE, 0.08), 0.5 * sig])
-    step[:3] = 0.03
-    return (np.concatenate([lo, -3 * sig]), np.concatenate([hi, 3 * sig])), step
-
-
-def _keep_best(fit: FrameFit, again: FrameFit) -> FrameFit:
-    """The attempt with the lower total cost (eq. 4.6), every attempt's cost and the time they
-    took together recorded on it (``attempt_costs``, ``all_attempts``, ``cpu_all_attempts``)."""
-    tries = fit.costs.get("attempt_costs", [fit.costs["total"]]) + again.costs.get("attempt_costs", [again.costs["total"]])
-    spent = [r.timings.get(k, r.timings[base]) for r in (fit, again)
-             for k, base in (("all_attempts", "total"), ("cpu_all_attempts", "cpu"))]
-    best = min((fit, again), key=lambda r: r.costs["total"])
-    best.costs["attempt_costs"] = tries
-    best.timings["all_attempts"] = round(spent[0] + spent[2], 4)
-    best.timings["cpu_all_attempts"] = round(spent[1] + spent[3], 4)
-    return best
-
-
-def _explains_poorly(quality: dict) -> bool:
-    """The quality gates found the fitted body explaining the silhouettes poorly (pooled or in a view)."""
-    return any(r["check"] in ("agreement", "view_agreement") for r in quality.get("reasons", []))
 
 
 def fit_frame_gender(cameras, masks, gender: str = "auto", **kwargs) -> FrameFit:

@@ -14,7 +14,7 @@ import numpy as np
 
 from studio.fit.errors import FitError
 
-__all__ = ["STATURE_STEPS", "feet_on_floor", "hull_centroid", "hull_height", "initial_poses", "standing_pose",
+__all__ = ["STATURE_STEPS", "costs_at_statures", "feet_on_floor", "hull_centroid", "hull_height", "initial_poses", "standing_pose",
            "stature_search", "stature_shape", "stride_poses"]
 
 #: Relative stature changes searched around the library's stature with its best posture
@@ -175,15 +175,25 @@ def stature_search(model, objective_of, pose: np.ndarray, stature: float, level:
     and its shape stayed short (−10 cm), while the fit's own cost, with the true posture, is
     lowest at the true stature (±5 cm: 1.5–2.5× the cost; dev people only).
     ``objective_of(shape)``: the pose objective (eq. 4.6, no free shape coefficient) of a shape."""
+    statures = stature * (1.0 + np.asarray(steps, dtype=np.float64))
+    cost, _ = costs_at_statures(model, objective_of, np.repeat(np.asarray(pose)[None], len(statures), axis=0),
+                                statures, level)
+    best = float(statures[int(np.argmin(cost))])
+    return best, stature_shape(model, best)
+
+
+def costs_at_statures(model, objective_of, poses: np.ndarray, statures: np.ndarray, level: int) -> tuple[np.ndarray, int]:
+    """(cost (N,) of each pose at pyramid ``level`` on the shape of its own stature
+    (:func:`stature_shape`), stood on the floor; the evaluations spent). ``objective_of(shape)``:
+    the pose objective of a shape, built once per distinct stature."""
     from studio.fit.library import stand_on_floor
 
-    best = None
-    for d in steps:
-        h = stature * (1.0 + d)
+    statures = np.asarray(statures, dtype=np.float64)
+    cost, n = np.empty(len(poses)), 0
+    for h in np.unique(statures):
+        sel = statures == h
         shape = stature_shape(model, h)
         obj = objective_of(shape)
-        p = stand_on_floor(model, shape, pose[None])[0]
-        c = float(obj(obj.pack(shape, p)[None], level)[0])
-        if best is None or c < best[0]:
-            best = (c, h, shape)
-    return best[1], best[2]
+        cost[sel] = obj(np.stack([obj.pack(shape, p) for p in stand_on_floor(model, shape, poses[sel])]), level)
+        n += obj.n_evaluations
+    return cost, n

@@ -16,7 +16,7 @@ from studio.cost import SilhouetteTarget, pose_limit_penalty, shape_prior, silho
 from studio.render.spans import ContourRenderer
 from studio.render.pyramid import level_camera
 
-__all__ = ["CylinderObjective", "FrameObjective", "pose_bounds"]
+__all__ = ["CylinderObjective", "FrameObjective", "parameter_box", "pose_bounds"]
 
 #: Evaluate the SCAPE meshes of at most this many particles in one batch.
 BATCH = 16
@@ -33,6 +33,15 @@ def pose_bounds(model, root_xy: np.ndarray | None = None, xy_margin: float = 1.0
         hi[:2] = np.asarray(root_xy, dtype=np.float64) + xy_margin
     lo[2], hi[2] = -0.6, 0.3
     return lo, hi
+
+
+def parameter_box(model, lo: np.ndarray, hi: np.ndarray, n_free: int) -> tuple[tuple[np.ndarray, np.ndarray], np.ndarray]:
+    """((lower, upper) bounds, typical steps) of a pose + ``n_free`` shape vector: the pose
+    bounds ``lo`` / ``hi`` and ±3 σ of the shape; steps 0.08 rad, 3 cm at the root, σ / 2."""
+    sig = np.sqrt(model.eigenvalues[:n_free])
+    step = np.concatenate([np.full(POSE_SIZE, 0.08), 0.5 * sig])
+    step[:3] = 0.03
+    return (np.concatenate([lo, -3 * sig]), np.concatenate([hi, 3 * sig])), step
 
 
 @dataclass

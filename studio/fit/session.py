@@ -37,7 +37,8 @@ from collections.abc import Callable
 import numpy as np
 
 from studio.fit.errors import FitError
-from studio.fit.frame import FitOptions, FrameFit
+from studio.fit.frame import FitOptions
+from studio.fit.result import FrameFit
 from studio.fit.quality import summary_line
 from studio.fit.units import MAX_TRACK_GAP, fit_unit, frame_fit_code_digest, stored_fit
 

@@ -98,7 +98,7 @@ def test_a_fit_of_several_views_explaining_them_poorly_is_searched_again_from_ot
     the lowest total cost is kept, every attempt's cost and CPU recorded."""
     from dataclasses import replace
 
-    from studio.fit.frame import _explains_poorly
+    from studio.fit.result import explains_poorly as _explains_poorly
 
     model, cams, shape, pose, V, masks = scene
     tiny = FitOptions(levels=(2, 2, 2), n_particles=8, n_layers=1, nm_evaluations=4, final_evaluations=4,

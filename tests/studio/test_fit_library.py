@@ -58,7 +58,7 @@ def test_match_finds_posture_heading_and_stature(model, family, yaw, scale_shape
     V = model.vertices(shape, pose)
     assert abs(V[:, 2].min()) < 1e-9
     masks = [silhouette(c, V, model.faces) for c in cams]
-    from studio.fit.init import hull_centroid
+    from studio.fit.init import costs_at_statures, hull_centroid
 
     m = library_match(model, cams, masks, hull_centroid(cams, masks))
     assert m["families"][0] == family
@@ -214,8 +214,8 @@ def test_shortlist_candidates_are_scored_at_their_own_stature(model):
     at 0.88 of it costs far more than on its own (dev half squat: 22.4 against 12.6, so the
     squat never started the search)."""
     from studio.fit import FitOptions
-    from studio.fit.frame import _costs_at_statures, build_targets
-    from studio.fit.init import hull_centroid
+    from studio.fit.frame import build_targets
+    from studio.fit.init import costs_at_statures, hull_centroid
     from studio.fit.objective import FrameObjective
 
     cams, shape, pose, masks = _squat_180(model)
@@ -225,7 +225,8 @@ def test_shortlist_candidates_are_scored_at_their_own_stature(model):
     np.testing.assert_allclose(ratio, ratio[0])  # one library body, scaled
     targets = build_targets(masks, [c.name for c in cams], FitOptions(levels=(1, 1, 1)))
     poses = np.stack([pose, pose])
-    own, n = _costs_at_statures(model, cams, targets, poses, np.array([1.80, 0.88 * 1.80]), 1, FitOptions(), None)
+    own, n = costs_at_statures(model, lambda s: FrameObjective(model, cams, targets, s, 0), poses,
+                               np.array([1.80, 0.88 * 1.80]), 1)
     obj = FrameObjective(model, cams, targets, shape, 0)
     assert own[0] == pytest.approx(float(obj(obj.pack(shape, pose)[None], 1)[0]), rel=1e-9)
     assert own[0] < 0.25 * own[1] and n == 2

@@ -15,7 +15,7 @@ from calibration import Camera
 from studio.body import BodyModel
 from studio.body.skeleton import POSE_SIZE
 from studio.cost import SilhouetteTarget
-from studio.fit.objective import BATCH, FrameObjective, pose_bounds
+from studio.fit.objective import BATCH, FrameObjective, parameter_box, pose_bounds
 from studio.render import silhouette
 
 JOINT = 6  # first angle after the root: limits (-0.5, 1.2)
@@ -100,6 +100,22 @@ def test_pose_bounds():
     np.testing.assert_allclose(lo[:3], [-0.05, -0.65, -0.6])
     np.testing.assert_allclose(hi[:3], [0.45, -0.15, 0.3])
     assert model.pose_limits[2, 0] == -10.0  # the model's own limits are left alone
+
+
+def test_parameter_box_bounds_pose_and_shape_with_their_steps():
+    """Pose + n shape coefficients: the pose bounds given, the shape within ±3 σ; steps 3 cm at
+    the root's position, 0.08 rad for every angle, σ / 2 for a coefficient."""
+    model = BodyModel.load("female")
+    lo, hi = pose_bounds(model, np.array([0.2, -0.1]))
+    (blo, bhi), step = parameter_box(model, lo, hi, 4)
+    sig = np.sqrt(model.eigenvalues[:4])
+    np.testing.assert_array_equal(blo, np.concatenate([lo, -3 * sig]))
+    np.testing.assert_array_equal(bhi, np.concatenate([hi, 3 * sig]))
+    np.testing.assert_array_equal(step[:3], 0.03)
+    np.testing.assert_array_equal(step[3:POSE_SIZE], 0.08)
+    np.testing.assert_allclose(step[POSE_SIZE:], 0.5 * sig, rtol=1e-15)
+    (plo, phi), pstep = parameter_box(model, lo, hi, 0)
+    assert plo.shape == phi.shape == pstep.shape == (POSE_SIZE,)
 
 
 def test_integer_inputs_are_taken_as_real_numbers(scene):

@@ -191,7 +191,7 @@ def test_one_view_fit_explaining_poorly_is_searched_again(scene):
     searched again."""
     from dataclasses import replace
 
-    from studio.fit.frame import _explains_poorly
+    from studio.fit.result import explains_poorly as _explains_poorly
 
     model, cams, pose, labels = scene
     tiny = FitOptions(levels=(2, 1, 1), n_particles=12, n_layers=2, nm_evaluations=6, final_evaluations=6,

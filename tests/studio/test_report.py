@@ -12,7 +12,7 @@ import pytest
 from calibration import Camera, RigCalibration
 from studio.body import BodyModel, measure
 from studio.cli import main
-from studio.fit.frame import FrameFit
+from studio.fit.result import FrameFit
 from studio.fit.output import write_frame_fit
 from studio.fit.quality import fit_quality
 from studio.report import Participant, write_report

@@ -6,10 +6,11 @@ from pathlib import Path
 
 
 def alive(pid: int) -> bool:
-    """The process exists and is not a zombie."""
+    """The process exists and is not a zombie (a process that dies between the open and the read of
+    its ``stat`` raises ``ProcessLookupError``: gone too)."""
     try:
         return Path(f"/proc/{pid}/stat").read_text().split(") ")[1][0] != "Z"
-    except FileNotFoundError:
+    except (FileNotFoundError, ProcessLookupError):
         return False
 
 
@@ -17,7 +18,7 @@ def children(pid: int) -> list[int]:
     """Children started by the process's main thread."""
     try:
         return [int(v) for v in Path(f"/proc/{pid}/task/{pid}/children").read_text().split()]
-    except FileNotFoundError:
+    except (FileNotFoundError, ProcessLookupError):
         return []
 
 

@@ -46,10 +46,14 @@ def test_busy_workers_exit_within_seconds_of_the_parent(sig):
     (measured: ~0.01 s after SIGKILL through PR_SET_PDEATHSIG, ~0.1 s after SIGTERM/SIGINT through
     the pool's own termination)."""
     proc, pids = _start_parent()
-    time.sleep(0.3)
-    os.kill(proc.pid, sig)
-    gone = _seconds_until_gone(pids)
-    proc.communicate(timeout=10)
+    try:
+        time.sleep(0.3)
+        os.kill(proc.pid, sig)
+        gone = _seconds_until_gone(pids)
+    finally:  # never leave the parent behind, even when the wait above fails
+        if proc.poll() is None:
+            proc.kill()
+        proc.communicate(timeout=10)
     print(f"{sig.name}: workers gone {gone:.3f} s after the parent's signal")
     assert gone < 5.0, f"workers still alive {gone} s after {sig.name}"
     if sig != signal.SIGKILL:

@@ -99,7 +99,10 @@ VARIANTS = {"full": {}, "no-library": {"start": "stride"}, "no-rival": {"rival_h
             "dev-seat-parts": {},
             # issue 13: the seat's don't-care region keeps what the seat parts cover; a third attempt
             # of a frame flagged twice, the library's candidates each at its own stature
-            "dev-seat-stature": {}, "seat-stature": {}}
+            "dev-seat-stature": {}, "seat-stature": {},
+            # issue 13: the model's pose deformation on rotation entries minus I, learned also from wide
+            # poses (not landed: git branch experiment/rmi-pose-deformation, its model file and kernel)
+            "dev-rmi": {}, "rmi": {}}
 STANDING = ("a_pose", "t_pose", "arms_overhead", "hands_on_hips", "arm_forward", "arms_crossed", "wide_stance",
             "torso_twist")
 

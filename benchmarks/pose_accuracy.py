@@ -40,7 +40,9 @@ at (it had scored them all at the best match's stature); ``retry-stature`` / ``d
 only when a flagged frame is searched again. ``seat-stature`` / ``dev-seat-stature``: the code that leaves the
 pixels a seated body's pelvis and thighs cover over a stool to the stool (``dev-seat-parts``: that alone, dev seated
 frames) and searches a frame flagged after its retry a third time, at the candidates' own statures (the first two
-attempts as before). ``--families`` fits only the frames
+attempts as before). ``rmi`` / ``dev-rmi``: the code of the git branch ``experiment/rmi-pose-deformation`` (the
+model's pose deformation on the relative rotations' entries minus I, learned also from wide poses; not on
+``main``). ``--families`` fits only the frames
 of the named posture families (e.g. ``--families seated`` for ``no-support``).
 
 Splits (``--split``): ``held-out`` (the default, seeds from 1000, only ever measured: the figures
@@ -348,13 +350,14 @@ def summarise(rows: list[dict], split: str = "held-out") -> dict:
 def table(args) -> int:
     from rigs.atomic import atomic_write_json
 
-    results = {v: summarise(_rows(v, args.split), args.split) for v in VARIANTS if _rows(v, args.split)}
+    rows = {v: r for v in VARIANTS if (r := _rows(v, args.split))}  # each variant's results read once
+    results = {v: summarise(r, args.split) for v, r in rows.items()}
     cols = ("frames", "surface_median_mm", "surface_p90_mm", "surface_worst_mm", "stature_error_median_mm",
             "joint_median_mm", "precision", "recall", "time_s", "ok_share", "ok_clean_share")
     short = ("n", "surf med", "surf p90", "surf max", "stat med", "joint med", "prec", "rec", "s/frame", "ok",
              "ok clean")
     for variant, summary in results.items():
-        codes = sorted({str(r.get("code", "not recorded")) for r in _rows(variant, args.split)})
+        codes = sorted({str(r.get("code", "not recorded")) for r in rows[variant]})
         print(f"\n== variant {variant} (fitting code {', '.join(codes)})")
         print(f"{'family':15s} " + " ".join(f"{c:>9s}" for c in short))
         for fam, r in summary.items():

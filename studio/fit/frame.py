@@ -44,6 +44,7 @@
 
 from __future__ import annotations
 
+import functools
 import logging
 import time
 import numpy as np
@@ -196,6 +197,10 @@ def fit_frame(
     n_free = options.n_shape_free if options.fit_shape else 0
     n_free = min(n_free, model.n_shape)
 
+    def scape_of(shape):
+        """The SCAPE pose objective (eq. 4.6, no free shape coefficient) of ``shape`` on the current targets."""
+        return FrameObjective(model, cameras, targets, shape, 0, options.prior_weight, shadow=shadow)
+
     def objectives(targets):
         """(SCAPE, search) objectives of the pose: the global search scores the 15-cone model
         (§4.8.1) by default; the heading grid, the check of the cones' answer and the
@@ -203,6 +208,10 @@ def fit_frame(
         scape = FrameObjective(model, cameras, targets, base_shape, 0, options.prior_weight, shadow=shadow)
         return scape, (CylinderObjective(model, cameras, targets, base_shape, 0, options.prior_weight, shadow=shadow)
                        if options.search_model == "cylinder" else scape)
+
+    def spent() -> int:
+        """Evaluations of the current pose objectives (counted before they are replaced)."""
+        return pose_obj.n_evaluations + (apf_obj.n_evaluations if apf_obj is not pose_obj else 0)
 
     pose_obj, apf_obj = objectives(targets)
     early, n_early = None, 0
@@ -227,12 +236,10 @@ def fit_frame(
                 # → 6.6 mm). Not on the first attempt or the retry: the coarse level's cost compares
                 # statures poorly (held out, on every frame: 8 fits closer, 5 farther, a walk's cost
                 # 0.24 → 0.74; on the retry: a torso twist 8 → 33 mm)
-                own, n_own = costs_at_statures(
-                    model, lambda s: FrameObjective(model, cameras, targets, s, 0, options.prior_weight, shadow=shadow),
-                    poses, statures, search)
+                own, n_own = costs_at_statures(model, scape_of, poses, statures, search)
                 n_early += n_own
                 if statures[np.argmin(own)] != init_height:
-                    n_early += pose_obj.n_evaluations + (apf_obj.n_evaluations if apf_obj is not pose_obj else 0)
+                    n_early += spent()
                     init_height = float(statures[np.argmin(own)])
                     base_shape = stature_shape(model, init_height)
                     pose_obj, apf_obj = objectives(targets)
@@ -254,16 +261,14 @@ def fit_frame(
             early = find_support(model, cameras, masks, base_shape, model.clip_pose(starts[0]))
             if early is not None:
                 targets = build_targets(masks, [c.name for c in cameras], options, ignore=early.ignore)
-                n_early += pose_obj.n_evaluations + (apf_obj.n_evaluations if apf_obj is not pose_obj else 0)
+                n_early += spent()
                 pose_obj, apf_obj = objectives(targets)
         if match is not None and init_height is not None and len(cameras) > 1 and options.stature_steps:
             # the library's stature refined with its best start (a stool left out as above)
-            init_height, base_shape = stature_search(
-                model, lambda s: FrameObjective(model, cameras, targets, s, 0, options.prior_weight, shadow=shadow),
-                starts[int(hint_pose is not None)], init_height, search, options.stature_steps)
+            init_height, base_shape = stature_search(model, scape_of, starts[int(hint_pose is not None)], init_height,
+                                                     search, options.stature_steps)
             starts = stand_on_floor(model, base_shape, starts)
-            n_early += (len(options.stature_steps) + pose_obj.n_evaluations
-                        + (apf_obj.n_evaluations if apf_obj is not pose_obj else 0))
+            n_early += len(options.stature_steps) + spent()
             pose_obj, apf_obj = objectives(targets)
         sigma = _pose_sigma(1.0)
         n_p, n_l = options.n_particles, options.n_layers
@@ -405,8 +410,7 @@ def fit_frame(
     fit = FrameFit(
         frame=int(frame), gender=model.gender, shape=shape_out, pose=pose_out,
         joints=model.joints(shape_out, pose_out), costs=costs, timings={k: round(v, 4) for k, v in timings.items()},
-        n_evaluations=int(n_early + pose_obj.n_evaluations + obj.n_evaluations
-                          + (apf_obj.n_evaluations if apf_obj is not pose_obj else 0)), settings=options.to_dict(),
+        n_evaluations=int(n_early + spent() + obj.n_evaluations), settings=options.to_dict(),
         quality=quality,
     )
     retries = MONOCULAR_RETRIES if len(cameras) == 1 else options.retries
@@ -415,20 +419,17 @@ def fit_frame(
         # (several views: from the library's other postures too) and the lower total cost is kept
         log.info("frame %d: the fitted body explains its views poorly: searching again", frame)
         avoid = _avoid + ((start_family,) if len(cameras) > 1 and start_family is not None else ())
-        again = fit_frame(model, given[0], given[1], frame=frame, shape=shape, hint_pose=hint_pose, options=options,
-                          seed=np.random.default_rng(seed).integers(2**31), screen=screen, lights=lights,
-                          shadow_masks=shadow_masks, shadow_weight=shadow_weight, ground=ground,
-                          light_uncertainty=light_uncertainty, _attempt=_attempt + 1, _avoid=avoid)
+        attempt = functools.partial(fit_frame, model, given[0], given[1], frame=frame, shape=shape, hint_pose=hint_pose,
+                                    options=options, screen=screen, lights=lights, shadow_masks=shadow_masks,
+                                    shadow_weight=shadow_weight, ground=ground, light_uncertainty=light_uncertainty)
+        again = attempt(seed=np.random.default_rng(seed).integers(2**31), _attempt=_attempt + 1, _avoid=avoid)
         fit = keep_best(fit, again)
         if (_attempt == 0 and len(cameras) > 1 and match is not None and shape is None
                 and explains_poorly(fit.quality)):
             # flagged again: once more from the library's other postures, each at its own stature
             avoid += tuple(f for f in (again.costs.get("start_family"),) if f is not None)
-            last = fit_frame(model, given[0], given[1], frame=frame, hint_pose=hint_pose, options=options,
-                             seed=np.random.default_rng(seed).integers(2**31, size=2)[1], screen=screen, lights=lights,
-                             shadow_masks=shadow_masks, shadow_weight=shadow_weight, ground=ground,
-                             light_uncertainty=light_uncertainty, _attempt=retries, _avoid=avoid,
-                             _own_statures=True)
+            last = attempt(seed=np.random.default_rng(seed).integers(2**31, size=2)[1], _attempt=retries,
+                           _avoid=avoid, _own_statures=True)
             fit = keep_best(fit, last)
     return fit
 

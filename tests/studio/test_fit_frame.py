@@ -98,7 +98,7 @@ def test_a_fit_of_several_views_explaining_them_poorly_is_searched_again_from_ot
     the lowest total cost is kept, every attempt's cost and CPU recorded."""
     from dataclasses import replace
 
-    from studio.fit.result import explains_poorly as _explains_poorly
+    from studio.fit.result import explains_poorly
 
     model, cams, shape, pose, V, masks = scene
     tiny = FitOptions(levels=(2, 2, 2), n_particles=8, n_layers=1, nm_evaluations=4, final_evaluations=4,
@@ -106,13 +106,13 @@ def test_a_fit_of_several_views_explaining_them_poorly_is_searched_again_from_ot
                       rival_heading=False, find_support=False, retries=0)
     assert FitOptions().retries == 1  # on by default
     once = fit_frame(model, cams, masks, options=tiny, seed=3)
-    assert _explains_poorly(once.quality) and "attempt_costs" not in once.costs
+    assert explains_poorly(once.quality) and "attempt_costs" not in once.costs
     first = once.costs["start_family"]
     again = fit_frame(model, cams, masks, options=tiny, seed=np.random.default_rng(3).integers(2**31),
                       _attempt=1, _avoid=(first,))
     assert again.costs["start_family"] != first
     kept = min(once, again, key=lambda f: f.costs["total"])
-    assert _explains_poorly(kept.quality)  # so a third attempt follows
+    assert explains_poorly(kept.quality)  # so a third attempt follows
     last = fit_frame(model, cams, masks, options=tiny, seed=np.random.default_rng(3).integers(2**31, size=2)[1],
                      _attempt=1, _avoid=(first, again.costs["start_family"]), _own_statures=True)
     assert last.costs["start_family"] not in (first, again.costs["start_family"])

@@ -58,7 +58,7 @@ def test_match_finds_posture_heading_and_stature(model, family, yaw, scale_shape
     V = model.vertices(shape, pose)
     assert abs(V[:, 2].min()) < 1e-9
     masks = [silhouette(c, V, model.faces) for c in cams]
-    from studio.fit.init import costs_at_statures, hull_centroid
+    from studio.fit.init import hull_centroid
 
     m = library_match(model, cams, masks, hull_centroid(cams, masks))
     assert m["families"][0] == family

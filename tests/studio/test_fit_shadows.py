@@ -191,7 +191,7 @@ def test_one_view_fit_explaining_poorly_is_searched_again(scene):
     searched again."""
     from dataclasses import replace
 
-    from studio.fit.result import explains_poorly as _explains_poorly
+    from studio.fit.result import explains_poorly
 
     model, cams, pose, labels = scene
     tiny = FitOptions(levels=(2, 1, 1), n_particles=12, n_layers=2, nm_evaluations=6, final_evaluations=6,
@@ -199,7 +199,7 @@ def test_one_view_fit_explaining_poorly_is_searched_again(scene):
                       rival_heading=False, find_support=False, start="stride")
     args = {"shape": model.mean_shape(), "options": tiny, "lights": [LIGHT], "seed": 3}
     once = fit_frame(model, cams[:1], [labels[0] == 1], shadow_masks=[labels[0] == 2], _attempt=1, **args)
-    assert _explains_poorly(once.quality)  # the tiny budget leaves the body off
+    assert explains_poorly(once.quality)  # the tiny budget leaves the body off
     fit = fit_frame(model, cams[:1], [labels[0] == 1], shadow_masks=[labels[0] == 2], **args)
     first, second = fit.costs["attempt_costs"]
     assert first == pytest.approx(once.costs["total"], rel=1e-12) and first != second

@@ -112,7 +112,8 @@ class FitOptions:
     the fits changed chaotically: median surface 9.8 → 9.8 mm, 90th percentile 13.1 → 17.7 mm,
     `ok` 89 → 82 %, a half squat +52 mm tall (−6 before).
     ``retries``: a frame of several views fitted from its silhouettes whose body explains them
-    poorly (the agreement gates) is searched again up to this many times, with other random
+    poorly (the agreement gates) or at a high cost for its silhouettes' size
+    (:func:`studio.fit.result.search_again`) is searched again up to this many times, with other random
     draws and from the library's postures other than those the last attempt started from; the
     lowest total cost is kept (one view: ``studio.fit.frame.MONOCULAR_RETRIES``). Before the
     least-squares polish, on the dev people (24 frames, 4 flagged) one retry kept the first

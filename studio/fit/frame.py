@@ -417,7 +417,7 @@ def fit_frame(
     if previous_pose is None and _attempt < retries and search_again(quality, cameras):
         # a body that explains the silhouettes poorly (or at a high cost) is searched again with other random draws
         # (several views: from the library's other postures too) and the lower total cost is kept
-        log.info("frame %d: the fitted body explains its views poorly: searching again", frame)
+        log.info("frame %d: the fitted body explains its views poorly or at a high cost: searching again", frame)
         avoid = _avoid + ((start_family,) if len(cameras) > 1 and start_family is not None else ())
         attempt = functools.partial(fit_frame, model, given[0], given[1], frame=frame, shape=shape, hint_pose=hint_pose,
                                     options=options, screen=screen, lights=lights, shadow_masks=shadow_masks,
@@ -426,7 +426,7 @@ def fit_frame(
         fit = keep_best(fit, again)
         if (_attempt == 0 and len(cameras) > 1 and match is not None and shape is None
                 and search_again(fit.quality, cameras)):
-            # flagged again: once more from the library's other postures, each at its own stature
+            # still flagged or costly: once more from the library's other postures, each at its own stature
             avoid += tuple(f for f in (again.costs.get("start_family"),) if f is not None)
             last = attempt(seed=np.random.default_rng(seed).integers(2**31, size=2)[1], _attempt=retries,
                            _avoid=avoid, _own_statures=True)

@@ -115,6 +115,8 @@ def lab_postures(results: dict) -> None:
     """The pose library's families (what a lab records: seated, arms overhead, half squat, ...) on
     4 + 4 held-out adults at the true pose, model vs Anny's posing of the same person (shape
     fitted at rest, no alignment): with the regressed Q and rigid (Q = I)."""
+    if "--no-anny" in sys.argv:
+        return
     try:
         from studio.body.anny_adapter import anny_truth_meshes
     except ImportError:
@@ -388,8 +390,7 @@ def main() -> int:
         pose_error(results)
         print("\nEnd to end vs Anny truth bodies (8 held-out phenotypes, unseen poses, first one unposed; shape fitted at rest)")
         posed_truth(results)
-        if "--no-anny" not in sys.argv:
-            lab_postures(results)
+        lab_postures(results)
         measurements_vs_anny(results)
     else:
         print(f"held-out sets not found in {SCRATCH}: run `studio model build --scratch DIR` and set STUDIO_BODY_SCRATCH")

@@ -42,7 +42,9 @@ pixels a seated body's pelvis and thighs cover over a stool to the stool (``dev-
 frames) and searches a frame flagged after its retry a third time, at the candidates' own statures (the first two
 attempts as before). ``rmi`` / ``dev-rmi``: the code of the git branch ``experiment/rmi-pose-deformation`` (the
 model's pose deformation on the relative rotations' entries minus I, learned also from wide poses; not on
-``main``). ``--families`` fits only the frames
+``main``); ``dev-rmi8`` / ``dev-rmi8r``: the same branch with the deformation's kernel at rank 8 per joint pair,
+without / with the retry below (dev only). ``cost-retry`` / ``dev-cost-retry``: a fit at a high silhouette cost for
+its silhouettes' size searched again (``studio.fit.result.search_again``). ``--families`` fits only the frames
 of the named posture families (e.g. ``--families seated`` for ``no-support``).
 
 Splits (``--split``): ``held-out`` (the default, seeds from 1000, only ever measured: the figures
@@ -106,7 +108,7 @@ VARIANTS = {"full": {}, "no-library": {"start": "stride"}, "no-rival": {"rival_h
             # poses (not landed: git branch experiment/rmi-pose-deformation, its model file and kernel)
             "dev-rmi": {}, "rmi": {},
             # issue 13: the same at rank 8 per joint pair (the kernel's cost); with a high final cost searched again (r)
-            "dev-rmi8": {}, "rmi8": {}, "dev-rmi8r": {}, "rmi8r": {},
+            "dev-rmi8": {}, "dev-rmi8r": {},
             # issue 13: a fit at a high silhouette cost for its silhouettes' size searched again
             "dev-cost-retry": {}, "cost-retry": {}}
 STANDING = ("a_pose", "t_pose", "arms_overhead", "hands_on_hips", "arm_forward", "arms_crossed", "wide_stance",

@@ -8,10 +8,12 @@
   cylinder model (§4.8.1) at the search level, in batches of 32;
 - the same at the pyramid levels the fitter searches with;
 - one single-frame fit from the silhouettes (particle filter → staged Nelder–Mead) of frame
-  ``--frame`` (default 12, the README's figure), wall and CPU (process) time, per stage;
+  ``--frame`` (default 12, the README's figure), wall and CPU (process) time, per stage, with the
+  batches on one thread and on every core (:mod:`studio.threads`), ``--repeat`` times each,
+  alternating (medians; the fits must agree to the last digit);
 - a sequence of N frames (default 20) fitted with 1 and with 2 worker processes.
 
-Usage: ``.venv/bin/python benchmarks/fit_speed.py [--frame 12] [--sequence 20] [--quick]``
+Usage: ``.venv/bin/python benchmarks/fit_speed.py [--frame 12] [--sequence 20] [--repeat 3] [--quick]``
 """
 
 from __future__ import annotations
@@ -52,11 +54,13 @@ def main(argv=None) -> int:
     from studio.render.spans import silhouettes_contour
     from studio.segment import segment_session
     from studio.simulate import ensure_rendered
+    from studio.threads import set_threads, threads
 
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--spec", type=Path, default=ROOT / "studio" / "samples" / "walk" / "spec.yaml")
     ap.add_argument("--sequence", type=int, default=20, help="frames of the sequence timing (0: skip)")
     ap.add_argument("--frame", type=int, default=12, help="the frame fitted alone from its silhouettes")
+    ap.add_argument("--repeat", type=int, default=3, help="single-frame fits per thread count (medians)")
     ap.add_argument("--quick", action="store_true")
     args = ap.parse_args(argv)
     options = FitOptions(**QUICK) if args.quick else FitOptions()
@@ -95,11 +99,28 @@ def main(argv=None) -> int:
     B = 16
     res["scape_mesh_batched_per_body_ms"] = 1000 * _best(
         lambda: model.vertices_batch(np.zeros((B, model.n_shape)), np.zeros((B, model.pose_size))), 5) / B
-    t, c = time.perf_counter(), time.process_time()
-    fit = fit_frame(model, cams, ws.person_masks(args.frame), frame=args.frame, options=options, seed=0)
-    res["single_frame_fit_s"] = time.perf_counter() - t
-    res["single_frame_fit_cpu_s"] = time.process_time() - c
+    # the single frame with the batches on one thread and on every core, alternating (the same fit
+    # to the last digit: checked)
+    cores = max(threads(), 2)
+    runs = {1: [], cores: []}
+    costs = set()
+    for _ in range(args.repeat):
+        for n in runs:
+            set_threads(n)
+            t, c = time.perf_counter(), time.process_time()
+            fit = fit_frame(model, cams, ws.person_masks(args.frame), frame=args.frame, options=options, seed=0)
+            runs[n].append((time.perf_counter() - t, time.process_time() - c))
+            costs.add((fit.costs["total"], fit.shape.tobytes(), fit.pose.tobytes()))
+    set_threads(None)
+    if len(costs) != 1:
+        raise SystemExit(f"the single-frame fit differs between runs or thread counts ({len(costs)} answers)")
+    for n, r in runs.items():
+        res[f"single_frame_fit_threads{n}_s"] = float(np.median([w for w, _ in r]))
+        res[f"single_frame_fit_threads{n}_cpu_s"] = float(np.median([c for _, c in r]))
+    res["single_frame_fit_s"] = res[f"single_frame_fit_threads{cores}_s"]
+    res["single_frame_fit_cpu_s"] = res[f"single_frame_fit_threads{cores}_cpu_s"]
     res["single_frame"] = args.frame
+    res["single_frame_threads"] = cores
     res["single_frame_evaluations"] = fit.n_evaluations
     res["single_frame_timings"] = fit.timings
     if n_seq > 0:
@@ -123,7 +144,9 @@ def main(argv=None) -> int:
     ok = res["render_plus_cost4_level0_ms"] <= 10
     print(f"  4-view cost at full resolution: {res['render_plus_cost4_level0_ms']:.1f} ms (anchor ≤ 10 ms: "
           f"{'OK' if ok else 'MISSED'}); level 2: {res['render_plus_cost4_level2_ms']:.1f} ms")
-    print(f"  single-frame fit (frame {args.frame}): {res['single_frame_fit_s']:.1f} s wall, "
+    print(f"  single-frame fit (frame {args.frame}, median of {args.repeat}): one thread "
+          f"{res['single_frame_fit_threads1_s']:.1f} s wall, {res['single_frame_fit_threads1_cpu_s']:.1f} s CPU; "
+          f"{cores} threads {res['single_frame_fit_s']:.1f} s wall, "
           f"{res['single_frame_fit_cpu_s']:.1f} s CPU (anchor ≤ 60 s: "
           f"{'OK' if res['single_frame_fit_s'] <= 60 else 'MISSED'}; issue 13: ≤ 15 s; thesis ~40 min)")
     print(f"wrote {out}")

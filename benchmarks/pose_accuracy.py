@@ -44,7 +44,12 @@ attempts as before). ``rmi`` / ``dev-rmi``: the code of the git branch ``experim
 model's pose deformation on the relative rotations' entries minus I, learned also from wide poses; not on
 ``main``); ``dev-rmi8`` / ``dev-rmi8r``: the same branch with the deformation's kernel at rank 8 per joint pair,
 without / with the retry below (dev only). ``cost-retry`` / ``dev-cost-retry``: a fit at a high silhouette cost for
-its silhouettes' size searched again (``studio.fit.result.search_again``). ``--families`` fits only the frames
+its silhouettes' size searched again (``studio.fit.result.search_again``). ``dev-batch-rows``: code
+whose body meshes did not depend on the batch they were evaluated in (a single body's shape product by the same
+BLAS routine as a batch's; 1e-9 m; not landed: it moved every fit) and whose batches run on threads
+(:mod:`studio.threads`; one per worker there, so the CPU figures compare). ``threads``: the landed code, whose
+batches run on threads and whose fits equal ``cost-retry``'s to the last digit, run one frame at a time on 2
+threads (``--workers 1 --threads 2``). ``--families`` fits only the frames
 of the named posture families (e.g. ``--families seated`` for ``no-support``).
 
 Splits (``--split``): ``held-out`` (the default, seeds from 1000, only ever measured: the figures
@@ -55,7 +60,7 @@ Steps (resumable: every fitted frame is cached as JSON with the fitting code's d
 what is missing, and refuses to add frames to a variant fitted by other code — a variant holds one code's figures):
 
     /path/to/python-with-anny benchmarks/pose_accuracy.py build --people 30   # torch + anny
-    .venv/bin/python benchmarks/pose_accuracy.py run --variant full --workers 2
+    .venv/bin/python benchmarks/pose_accuracy.py run --variant full --workers 2 [--threads 1]
     .venv/bin/python benchmarks/pose_accuracy.py table
 
 Anchors (the issue's targets): median surface ≤ 8 mm, worst ≤ 15 mm per family; stature
@@ -110,7 +115,13 @@ VARIANTS = {"full": {}, "no-library": {"start": "stride"}, "no-rival": {"rival_h
             # issue 13: the same at rank 8 per joint pair (the kernel's cost); with a high final cost searched again (r)
             "dev-rmi8": {}, "dev-rmi8r": {},
             # issue 13: a fit at a high silhouette cost for its silhouettes' size searched again
-            "dev-cost-retry": {}, "cost-retry": {}}
+            "dev-cost-retry": {}, "cost-retry": {},
+            # issue 13: a body's mesh independent of the batch it is evaluated in (one gemm for a single
+            # row; not landed) and the batches on threads (one thread in the benchmark's workers)
+            "dev-batch-rows": {},
+            # issue 13: the batches on threads, the same fits as cost-retry (run with --workers 1 --threads 2:
+            # the wall time of a frame fitted alone on 2 cores)
+            "threads": {}}
 STANDING = ("a_pose", "t_pose", "arms_overhead", "hands_on_hips", "arm_forward", "arms_crossed", "wide_stance",
             "torso_twist")
 
@@ -235,6 +246,7 @@ def run(args) -> int:
     from studio.segment import segment_session
     from studio.fit.units import frame_fit_code_digest
     from studio.simulate import ensure_rendered
+    from studio.threads import set_threads
     from studio.workers import worker_pool
 
     root = bench_root(args.split)
@@ -255,12 +267,12 @@ def run(args) -> int:
     t0, n = time.perf_counter(), 0
 
     def save(fut):
-        r = {**fut.result(), "code": code}
+        r = {**fut.result(), "code": code, "threads": args.threads}
         atomic_write_json(out / f"{r['person']}_{r['frame']}.json", r)
         print(f"{r['person']} frame {r['frame']} ({r['family']}): {r.get('surface_mm', float('nan')):.1f} mm, "
               f"{r['status']}, {time.perf_counter() - t0:.0f} s", flush=True)
 
-    with worker_pool(args.workers) as pool:
+    with worker_pool(args.workers, set_threads, (args.threads,)) as pool:
         pending = []
         for p in everyone:
             spec = root / p["name"] / "spec.yaml"
@@ -392,6 +404,8 @@ def main(argv=None) -> int:
     ap.add_argument("--poses", type=int, default=4, help="postures per person")
     ap.add_argument("--variant", choices=tuple(VARIANTS), default="full")
     ap.add_argument("--workers", type=int, default=2)
+    ap.add_argument("--threads", type=int, default=1,
+                    help="threads per worker (studio.threads; 1: CPU figures comparable between runs)")
     ap.add_argument("--split", choices=tuple(SPLITS), default="held-out",
                     help="held-out (reported, never tuned on) or dev (for tuning)")
     ap.add_argument("--families", nargs="*", default=None, help="fit only the frames of these posture families")

@@ -68,6 +68,7 @@ def main(argv=None) -> int:
     from studio.fit.session import CHAIN_LENGTH
     from studio.segment import segment_session
     from studio.simulate import ensure_rendered
+    from studio.threads import set_threads
     from studio.workspace import Workspace
 
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
@@ -77,6 +78,9 @@ def main(argv=None) -> int:
     ap.add_argument("--per-participant", type=int, default=24, help="frames per participant in the study estimate")
     ap.add_argument("--quick", action="store_true", help="the fit's --quick settings")
     args = ap.parse_args(argv)
+    # one worker is one core: the fitting process keeps its batches on one thread, as every worker
+    # process does (a frame's batches on both cores are benchmarks/fit_speed.py's)
+    set_threads(1)
     options = FitOptions(**QUICK) if args.quick else FitOptions()
     session = ensure_rendered(args.spec, seed=0)
     frames = list(range(min(args.frames, 24)))

@@ -64,17 +64,20 @@ def parse_scheduler(text: str | None) -> tuple[str, int | str] | None:
 
 
 def worker_setup(die_with_parent: bool = True) -> None:
-    """What every worker process runs once: die with the parent (local processes), BLAS and
-    OpenCV on one thread (one worker per core; :mod:`studio.blas`), freed image-sized blocks
-    kept for reuse (a Dask nanny's malloc setting undone; :mod:`studio.allocator`)."""
+    """What every worker process runs once: die with the parent (local processes), BLAS, OpenCV
+    and the fit's batches on one thread (one worker per core; :mod:`studio.blas`,
+    :mod:`studio.threads`), freed image-sized blocks kept for reuse (a Dask nanny's malloc
+    setting undone; :mod:`studio.allocator`)."""
     import cv2
 
     from studio.allocator import keep_large_blocks
     from studio.blas import limit_blas_threads
+    from studio.threads import set_threads
     from studio.workers import die_with_parent as tie
 
     if die_with_parent:
         tie()
+    set_threads(1)
     cv2.setNumThreads(1)
     limit_blas_threads()
     keep_large_blocks()

@@ -30,6 +30,7 @@ from numba import njit
 
 from studio.body.skeleton import JOINT_KIND, PART_NAMES, POSE_SIZE, pose_slices
 from studio.fit.quality import pool_any
+from studio.threads import map_chunks, threads
 
 __all__ = ["FAMILIES", "SCALES", "family_pose", "library_match", "library_scores", "pose_library", "stand_on_floor"]
 
@@ -201,12 +202,15 @@ def library_scores(points: np.ndarray, cameras, masks, yaws: np.ndarray, xy, *, 
     sizes = np.array([size for *_, size in pins], dtype=np.int64)
     offsets = np.concatenate([[0], np.cumsum(sizes[:, 0] * sizes[:, 1])])
     lights = np.stack([np.append(v[4], v[3]) for v in views])
-    return _scores(np.ascontiguousarray(points, dtype=np.float64), np.asarray(yaws, dtype=np.float64),
-                   np.asarray(xy, dtype=np.float64), np.stack([p[0] for p in pins]),
-                   np.stack([p[1] for p in pins]), np.stack([p[2] for p in pins]), sizes, offsets,
-                   np.concatenate([c.ravel() for c in inside]), np.concatenate([c.ravel() for c in wanted]),
-                   np.array([max(int(c.sum()), 1) for c in wanted], dtype=np.float64), lights, plane,
-                   np.array([v[5] for v in views], dtype=np.float64))
+    points = np.ascontiguousarray(points, dtype=np.float64)
+    rest = (np.asarray(yaws, dtype=np.float64), np.asarray(xy, dtype=np.float64), np.stack([p[0] for p in pins]),
+            np.stack([p[1] for p in pins]), np.stack([p[2] for p in pins]), sizes, offsets,
+            np.concatenate([c.ravel() for c in inside]), np.concatenate([c.ravel() for c in wanted]),
+            np.array([max(int(c.sum()), 1) for c in wanted], dtype=np.float64), lights, plane,
+            np.array([v[5] for v in views], dtype=np.float64))
+    bounds = np.linspace(0, len(points), threads() + 1).astype(int)  # each body's scores are its own
+    parts = map_chunks(lambda b: _scores(points[b[0]:b[1]], *rest), list(zip(bounds[:-1], bounds[1:])))
+    return np.concatenate(parts)
 
 
 @njit(cache=True, nogil=True)

@@ -28,6 +28,7 @@ import numpy as np
 
 from studio.blas import one_blas_thread
 from studio.body.skeleton import POSE_SIZE
+from studio.threads import map_chunks
 
 __all__ = ["band_samples", "contour_residuals", "lsq_polish", "polish_frame", "shape_residuals"]
 
@@ -126,9 +127,9 @@ def contour_residuals(obj, level: int = 0, balance: float = 1.0, l1: float | Non
     n_v = len(sample)
 
     def project(V):
-        """(N, V, 3) → per view (N, n_v, 2) pixels of the sampled vertices."""
+        """(N, V, 3) → per view (N, n_v, 2) pixels of the sampled vertices (views on threads)."""
         flat = np.ascontiguousarray(V[:, sample]).reshape(-1, 3)
-        return [cam.project(flat).reshape(len(V), n_v, 2) for cam in cams]
+        return map_chunks(lambda cam: cam.project(flat).reshape(len(V), n_v, 2), cams)
 
     def parts(V, uv):
         """Residuals of one body (mesh ``V``, projections ``uv``); also the nearest vertex and the
@@ -159,12 +160,14 @@ def contour_residuals(obj, level: int = 0, balance: float = 1.0, l1: float | Non
         V = obj.meshes(X)
         uv = project(V)
         _, nearest = parts(V[0], [u[0] for u in uv])
-        rows = []
-        for k, u in enumerate(uv):
+
+        def view_rows(k):
+            """The Jacobian's rows of view ``k``: its model → observed residuals, then the others."""
+            u = uv[k]
             du = (u[1:] - u[0]) / h[:, None, None]  # (D, V, 2) pixels per unit
             g = _bilinear(grads[k][..., 0], u[0]), _bilinear(grads[k][..., 1], u[0])
             slope = _root(_bilinear(dts[k], u[0]), l1)[1]
-            rows.append(((du[..., 0] * g[0] + du[..., 1] * g[1]) * slope / np.sqrt(n_v)).T)
+            rows = [((du[..., 0] * g[0] + du[..., 1] * g[1]) * slope / np.sqrt(n_v)).T]
             j, d = nearest[k]
             if len(j):
                 pts, _, tau, weight, norm = samples[k]
@@ -172,7 +175,9 @@ def contour_residuals(obj, level: int = 0, balance: float = 1.0, l1: float | Non
                 unit = diff / np.maximum(d, 1e-9)[:, None]
                 slope = _root(d, l1)[1] * ((d > 0) & (d < tau))
                 rows.append((weight * (du[:, j] * unit).sum(axis=-1) * slope / norm).T)
-        return np.vstack(rows)
+            return rows
+
+        return np.vstack([r for rows in map_chunks(view_rows, range(len(uv))) for r in rows])
 
     return residuals, jacobian
 

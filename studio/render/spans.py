@@ -189,9 +189,10 @@ def _topology(F: np.ndarray, n_vertices: int) -> _Topology | None:
     if held is not None and held[0] is F and held[1] == n_vertices:
         return held[2]
     key = (F.shape, n_vertices, hash(F.tobytes()))
-    if key in _TOPOLOGY_CACHE:
-        _TOPOLOGY_BY_ARRAY[id(F)] = (F, n_vertices, _TOPOLOGY_CACHE[key])
-        return _TOPOLOGY_CACHE[key]
+    held = _TOPOLOGY_CACHE.get(key, _TOPOLOGY_CACHE)  # one read: another thread may clear the cache
+    if held is not _TOPOLOGY_CACHE:
+        _TOPOLOGY_BY_ARRAY[id(F)] = (F, n_vertices, held)
+        return held
     a = F.reshape(-1).astype(np.int64)
     b = F[:, [1, 2, 0]].reshape(-1).astype(np.int64)
     face = np.repeat(np.arange(len(F)), 3)
@@ -244,10 +245,8 @@ class ContourRenderer:
         self.topology = _topology(self.faces, self.n_vertices)
         self.centres = np.stack([np.asarray(c.center, dtype=np.float64) for c in self.cameras], axis=1)
         self.lenses = [_pinhole_lens(c) for c in self.cameras]
-        # difference images of the scanline fill, kept all zeros between calls; a call made
-        # while another thread holds them uses fresh ones
-        self._diffs = [np.zeros((int(c.size[1]), int(c.size[0]) + 1), np.int32) for c in self.cameras]
-        self._lock = threading.Lock()
+        # difference images of the scanline fill, one set per thread, kept all zeros between calls
+        self._local = threading.local()
 
     def __call__(self, vertices: np.ndarray, *, near: float = 1e-3) -> list[np.ndarray]:
         """Silhouettes (H_k, W_k) bool of the mesh ``vertices`` (n_vertices, 3) in each camera."""
@@ -261,13 +260,11 @@ class ContourRenderer:
             return silhouettes_fast(self.cameras, V, self.faces, near=near)
         V = np.ascontiguousarray(V)
         facing = front_faces(V, self.faces, self.centres)  # (F, C)
-        mine = self._lock.acquire(blocking=False)
-        try:
-            diffs = self._diffs if mine else [np.zeros_like(d) for d in self._diffs]
-            return self._views(V, facing, diffs, near)
-        finally:
-            if mine:
-                self._lock.release()
+        diffs = getattr(self._local, "diffs", None)
+        if diffs is None:
+            diffs = self._local.diffs = [np.zeros((int(c.size[1]), int(c.size[0]) + 1), np.int32)
+                                         for c in self.cameras]
+        return self._views(V, facing, diffs, near)
 
     def _views(self, V, facing, diffs, near) -> list[np.ndarray]:
         from .winding import contour_edges, contour_silhouette, winding_fill

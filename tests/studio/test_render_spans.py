@@ -169,7 +169,8 @@ def _composed(cameras, V, F):
 @pytest.mark.parametrize("level", [0, 1])
 def test_renderer_one_pass_per_view_equals_the_composed_kernels(body, level):
     """ContourRenderer (one compiled call per view, the difference image cleared on the
-    contour's box only) gives the masks of the separate kernels bit for bit, body after body."""
+    contour's box only) gives the masks of the separate kernels bit for bit, body after body,
+    and on two threads at once."""
     from studio.render.spans import ContourRenderer
 
     model, meshes = body
@@ -180,9 +181,14 @@ def test_renderer_one_pass_per_view_equals_the_composed_kernels(body, level):
         assert sum(int(w.sum()) for w in want) > 1000 >> (2 * level)
         for g, w in zip(got, want, strict=True):
             np.testing.assert_array_equal(g, w)
-        assert not any(d.any() for d in renderer._diffs)  # the difference images are left clean
-    with renderer._lock:  # another thread renders: this call uses fresh difference images
-        for g, w in zip(renderer(meshes[0]), _composed(cams, meshes[0], model.faces), strict=True):
+        assert not any(d.any() for d in renderer._local.diffs)  # the difference images are left clean
+    # another thread renders with its own difference images, side by side with this one
+    from concurrent.futures import ThreadPoolExecutor
+
+    with ThreadPoolExecutor(2) as pool:
+        got = list(pool.map(renderer, meshes * 4))
+    for V, masks in zip(meshes * 4, got, strict=True):
+        for g, w in zip(masks, _composed(cams, V, model.faces), strict=True):
             np.testing.assert_array_equal(g, w)
     with pytest.raises(ValueError, match="vertices"):
         renderer(meshes[0][:-1])

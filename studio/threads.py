@@ -6,8 +6,8 @@ threads of one process. Each chunk's arithmetic is its own, so the results are t
 last bit whether the chunks run one after the other or side by side, and the cut does not depend
 on the thread count where it could change a result
 (:meth:`studio.fit.objective.FrameObjective.chunks`; tested). Measured on 2 cores: a particle
-filter's batch of 80 SCAPE bodies 120 → 65 ms wall; a frame fitted from its silhouettes about
-14 → 11 s wall.
+filter's batch of 80 SCAPE bodies 120 → 65 ms wall; walk frame 12 fitted from its silhouettes
+12.9 → 10.4 s wall (``benchmarks/fit_speed.py``).
 
 How many: :func:`set_threads`; else one in a worker process (a ``multiprocessing`` child: the
 workers already share out the cores; :func:`studio.execution.worker_setup` sets one too), every

@@ -22,8 +22,6 @@ import threading
 from collections.abc import Callable, Sequence
 from concurrent.futures import ThreadPoolExecutor
 
-import numpy as np
-
 __all__ = ["chunk_ranges", "map_chunks", "set_threads", "threads"]
 
 _count: int | None = None
@@ -82,8 +80,7 @@ def chunk_ranges(n: int, size: int, *, balance: bool = True) -> list[tuple[int, 
     balanced = -(-k // t) * t
     if balanced <= n // 2:
         k = balanced
-    bounds = np.linspace(0, n, k + 1).round().astype(int)
-    return list(zip(bounds[:-1].tolist(), bounds[1:].tolist()))
+    return [(i * n // k, (i + 1) * n // k) for i in range(k)]  # integers: on every evaluation's path
 
 
 def map_chunks(fn: Callable, chunks: Sequence) -> list:

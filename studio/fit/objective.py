@@ -108,7 +108,7 @@ class FrameObjective:
         mesh no longer depended on its batch, moved every dev fit: 59 of 64 by less than 0.3 mm, 5 by
         0.3–1.3). Either way the cut, so the results, do not depend on the thread count."""
         X = np.atleast_2d(X)
-        shared = not self.n_shape_free or bool(np.all(X[:, POSE_SIZE:] == X[:1, POSE_SIZE:]))
+        shared = not self.n_shape_free or len(X) < 2 or bool(np.all(X[:, POSE_SIZE:] == X[:1, POSE_SIZE:]))
         return chunk_ranges(len(X), BATCH, balance=shared)
 
     def masks(self, vertices: np.ndarray, level: int) -> list[np.ndarray]:

@@ -49,7 +49,10 @@ whose body meshes did not depend on the batch they were evaluated in (a single b
 BLAS routine as a batch's; 1e-9 m; not landed: it moved every fit) and whose batches run on threads
 (:mod:`studio.threads`; one per worker there, so the CPU figures compare). ``threads``: the landed code, whose
 batches run on threads and whose fits equal ``cost-retry``'s to the last digit, run one frame at a time on 2
-threads (``--workers 1 --threads 2``). ``--families`` fits only the frames
+threads (``--workers 1 --threads 2``). ``outline`` / ``dev-outline``: ``FitOptions.polish_outline`` on (the
+polish's vertices read their distance beyond the observed outline; run by code where it was the default, digests
+``ee6592ea…`` / ``4d09e367…``, the same arithmetic; left off); ``dev-outline-clipped``: the distance map less ½
+clipped at the pixel centres (code not kept). ``--families`` fits only the frames
 of the named posture families (e.g. ``--families seated`` for ``no-support``).
 
 Splits (``--split``): ``held-out`` (the default, seeds from 1000, only ever measured: the figures
@@ -121,7 +124,11 @@ VARIANTS = {"full": {}, "no-library": {"start": "stride"}, "no-rival": {"rival_h
             "dev-batch-rows": {},
             # issue 13: the batches on threads, the same fits as cost-retry (run with --workers 1 --threads 2:
             # the wall time of a frame fitted alone on 2 cores)
-            "threads": {}}
+            "threads": {},
+            # issue 13: the polish's vertices read their distance beyond the outline of the observed pixels'
+            # region, half a pixel past their centres (outline: FitOptions.polish_outline, a signed map, −½ on
+            # the observed pixels; clipped: the distance map less ½ at the pixel centres, code not kept)
+            "dev-outline-clipped": {}, "dev-outline": {"polish_outline": True}, "outline": {"polish_outline": True}}
 STANDING = ("a_pose", "t_pose", "arms_overhead", "hands_on_hips", "arm_forward", "arms_crossed", "wide_stance",
             "torso_twist")
 

@@ -370,7 +370,8 @@ def fit_frame(
                 if options.frontal_twin and previous_pose is None else None)
         obj, x_nm, polish, twin_costs, n_copy = polish_frame(obj, x_nm, box, pstep, level=final,
                                                              iterations=options.polish_iterations,
-                                                             shape_prior=options.polish_shape_prior, twin=twin)
+                                                             shape_prior=options.polish_shape_prior, twin=twin,
+                                                             outline=options.polish_outline)
         n_early += n_copy
     timings["polish"] = time.perf_counter() - t
     t = time.perf_counter()

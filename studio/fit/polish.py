@@ -6,7 +6,8 @@ pixels), so the fit searches it with Nelder–Mead, which in the ~40 dimensions 
 stalls short of the cost's own minimum. :func:`contour_residuals` gives a residual vector whose
 squared sum stands in for the two truncated chamfer directions of eq. 4.5 per view but is
 smooth in the parameters: every (second) model vertex projected into a view reads the observed
-silhouette's truncated distance map ``C^τ(F^o)`` bilinearly (model → observed), and every
+silhouette's truncated distance map ``C^τ(F^o)`` bilinearly (model → observed; with ``outline``,
+its distance beyond the outline of the observed pixels, :func:`outline_distance`), and every
 observed pixel near the observed outline that the model's silhouette does not cover reads its
 distance to the nearest projected vertex, truncated at τ (observed → model; the model's point
 cloud stands in for its outline, a covered pixel counts 0 as in eq. 4.4). A distance ``d``
@@ -40,6 +41,23 @@ OBSERVED_STRIDE = 2
 VERTEX_STRIDE = 2
 #: Forward-difference step of the Jacobian, a share of the parameters' typical step (``scale``).
 FD_STEP = 0.05
+#: The distance map counts from the observed pixels' centres; the outline of their region lies half a
+#: pixel beyond them (:func:`outline_distance`).
+HALF_PIXEL = 0.5
+
+
+def outline_distance(distance_map: np.ndarray) -> np.ndarray:
+    """A truncated distance map ``C^τ`` (0 on the observed pixels) made a signed distance to the
+    outline of the observed pixels' region: ``d − ½`` outside, ``−½`` on the observed pixels.
+    Read bilinearly at a projected vertex and clipped at 0 it is 0 up to that outline (the true
+    cost is flat while the model's outline moves between the last observed pixel centre and the
+    next: both silhouettes hold the same pixels) and grows past it; read from ``C^τ`` itself a
+    vertex on the outline counts ½ px, which holds the model's outline at the last observed
+    centres, on the edge of uncovering them. Used with ``FitOptions.polish_outline`` (off by
+    default: on the benchmark's Anny people it lowered the fit's own cost and balanced precision
+    and recall, but did not bring the bodies closer; see the option)."""
+    d = np.asarray(distance_map, dtype=np.float64)
+    return np.where(d > 0, d - HALF_PIXEL, -HALF_PIXEL)
 
 
 def _bilinear(img: np.ndarray, uv: np.ndarray) -> np.ndarray:
@@ -100,11 +118,12 @@ def band_samples(mask: np.ndarray) -> tuple[np.ndarray, tuple[np.ndarray, np.nda
 
 
 def contour_residuals(obj, level: int = 0, balance: float = 1.0, l1: float | None = 1.0, *, distance_maps=None,
-                      samples=None):
+                      samples=None, outline: bool = False):
     """(residuals, jacobian) of ``obj`` (a :class:`~studio.fit.objective.FrameObjective`) at
     ``level``: ``residuals(x) -> (M,)``, ``jacobian(x, h) -> (M, D)`` (forward differences of
     step ``h`` (D,)). See the module docstring for the residuals; ``balance`` weights the observed →
-    model direction against the other, ``l1`` is the smoothing of :func:`_root`.
+    model direction against the other, ``l1`` is the smoothing of :func:`_root`; ``outline``: the
+    vertices read their distance beyond the observed outline (:func:`outline_distance`).
 
     ``distance_maps`` (per view, level pixels; default the target's) and ``samples`` (per view
     ``(pixels (n, 2), (rows, cols), τ, weight, norm)``, τ / weight / norm scalars or (n,): each
@@ -121,7 +140,7 @@ def contour_residuals(obj, level: int = 0, balance: float = 1.0, l1: float | Non
     if samples is None:
         tau = float(target.tau_level)
         samples = [(pts, rc, tau, balance, np.sqrt(len(pts))) for pts, rc in map(band_samples, target.masks)]
-    dts = [np.asarray(d, dtype=np.float64) for d in distance_maps]
+    dts = [outline_distance(d) if outline else np.asarray(d, dtype=np.float64) for d in distance_maps]
     grads = [np.stack(np.gradient(d)[::-1], axis=-1) for d in dts]  # (H, W, 2): d/dx, d/dy
     sample = np.arange(0, obj.model.n_vertices, VERTEX_STRIDE)
     n_v = len(sample)
@@ -138,7 +157,7 @@ def contour_residuals(obj, level: int = 0, balance: float = 1.0, l1: float | Non
         masks = obj.masks(V, level)
         for k, p in enumerate(uv):
             pts, rc, tau, weight, norm = samples[k]
-            fwd = _root(_bilinear(dts[k], p), l1)[0] / np.sqrt(n_v)
+            fwd = _root(np.maximum(_bilinear(dts[k], p), 0.0), l1)[0] / np.sqrt(n_v)
             if len(pts):
                 d, j = cKDTree(p).query(pts)
                 d = np.where(masks[k][rc], 0.0, np.minimum(d, tau))
@@ -166,7 +185,8 @@ def contour_residuals(obj, level: int = 0, balance: float = 1.0, l1: float | Non
             u = uv[k]
             du = (u[1:] - u[0]) / h[:, None, None]  # (D, V, 2) pixels per unit
             g = _bilinear(grads[k][..., 0], u[0]), _bilinear(grads[k][..., 1], u[0])
-            slope = _root(_bilinear(dts[k], u[0]), l1)[1]
+            beyond = _bilinear(dts[k], u[0])
+            slope = _root(np.maximum(beyond, 0.0), l1)[1] * (beyond > 0) if outline else _root(beyond, l1)[1]
             rows = [((du[..., 0] * g[0] + du[..., 1] * g[1]) * slope / np.sqrt(n_v)).T]
             j, d = nearest[k]
             if len(j):
@@ -185,7 +205,7 @@ def contour_residuals(obj, level: int = 0, balance: float = 1.0, l1: float | Non
 @one_blas_thread  # the trust region's SVD of a ~18000 × 40 Jacobian: 0.06 s on one thread, 0.2–0.5 s on two
 def lsq_polish(obj, x0, bounds, scale, *, level: int = 0, max_nfev: int = 12, balance: float = 1.0,
                l1: float | None = 1.0, shape_prior: tuple[float, float] | None = None,
-               residuals=None) -> tuple[np.ndarray, float, dict]:
+               residuals=None, outline: bool = False) -> tuple[np.ndarray, float, dict]:
     """Trust-region least squares (``trf``, at most ``max_nfev`` iterations) on
     :func:`contour_residuals` from ``x0`` within ``bounds`` = (lo, hi), ``x_scale=scale`` (D,)
     (the parameters' typical steps; the Jacobian's step is ``FD_STEP`` of them). Returns the
@@ -195,12 +215,12 @@ def lsq_polish(obj, x0, bounds, scale, *, level: int = 0, max_nfev: int = 12, ba
     the observed → model direction; ``shape_prior``: (weight, threshold σ) of
     :func:`shape_residuals` appended to the residuals (None: none); ``residuals``: another
     (residuals, jacobian) pair of the form of :func:`contour_residuals` in its place (the batch's
-    clothing stand-in, :func:`studio.fit.batch.pose_polish`)."""
+    clothing stand-in, :func:`studio.fit.batch.pose_polish`); ``outline``: as :func:`contour_residuals`."""
     from scipy.optimize import least_squares
 
     lo, hi = (np.asarray(b, float) for b in bounds)
     x0 = np.clip(np.asarray(x0, float), lo, hi)
-    res, jac = contour_residuals(obj, level, balance, l1) if residuals is None else residuals
+    res, jac = contour_residuals(obj, level, balance, l1, outline=outline) if residuals is None else residuals
     h = FD_STEP * np.asarray(scale, float)
     if shape_prior is not None and shape_prior[0] > 0 and obj.n_shape_free:
         sres, sjac = shape_residuals(obj, *shape_prior)
@@ -229,12 +249,14 @@ def lsq_polish(obj, x0, bounds, scale, *, level: int = 0, max_nfev: int = 12, ba
                                      "njev": int(r.njev or 0)}
 
 
-def polish_frame(obj, x, box, step, *, level: int, iterations: int, shape_prior=None, twin=None):
+def polish_frame(obj, x, box, step, *, level: int, iterations: int, shape_prior=None, twin=None,
+                 outline: bool = False):
     """The fit's polish step: :func:`lsq_polish` of ``x`` (parameters of ``obj``, a
     :class:`~studio.fit.objective.FrameObjective`) within ``box`` = (lo, hi) with typical steps
     ``step``, whose length may free more shape coefficients than ``obj`` does (a copy of ``obj``
     then frees them, ``FitOptions.polish_shape_free``); with ``twin`` (``f(shape, pose) -> pose``)
-    the polished answer's twin is polished too and the lower cost kept. Returns ``(objective, x,
+    the polished answer's twin is polished too and the lower cost kept (``outline``: as
+    :func:`contour_residuals`). Returns ``(objective, x,
     record, twin_costs, n_copy)``: the objective of the later stages (``obj``, or ``obj`` with the
     extra coefficients held as polished in its base shape) and ``x`` in its parameters, the
     polish's record, [cost, twin's cost] (None without ``twin``) and the evaluations the copy made."""
@@ -242,12 +264,12 @@ def polish_frame(obj, x, box, step, *, level: int, iterations: int, shape_prior=
     pobj = obj if n_shape == obj.n_shape_free else replace(obj, n_shape_free=n_shape, n_evaluations=0)
     shapes, poses = obj.split(np.asarray(x, float)[None])
     xp, cost, record = lsq_polish(pobj, pobj.pack(shapes[0], poses[0]), box, step, level=level, max_nfev=iterations,
-                                  shape_prior=shape_prior)
+                                  shape_prior=shape_prior, outline=outline)
     twin_costs = None
     if twin is not None:
         shapes, poses = pobj.split(xp[None])
         xt, cost_t, _ = lsq_polish(pobj, pobj.pack(shapes[0], twin(shapes[0], poses[0])), box, step, level=level,
-                                   max_nfev=iterations, shape_prior=shape_prior)
+                                   max_nfev=iterations, shape_prior=shape_prior, outline=outline)
         twin_costs = [cost, cost_t]
         if cost_t < cost:
             xp = xt

@@ -186,6 +186,8 @@ def contour_residuals(obj, level: int = 0, balance: float = 1.0, l1: float | Non
             du = (u[1:] - u[0]) / h[:, None, None]  # (D, V, 2) pixels per unit
             g = _bilinear(grads[k][..., 0], u[0]), _bilinear(grads[k][..., 1], u[0])
             beyond = _bilinear(dts[k], u[0])
+            # clipped at 0, the signed reading has no slope inside (the map's own reading keeps the
+            # slope it had there: the default fits unchanged to the last digit)
             slope = _root(np.maximum(beyond, 0.0), l1)[1] * (beyond > 0) if outline else _root(beyond, l1)[1]
             rows = [((du[..., 0] * g[0] + du[..., 1] * g[1]) * slope / np.sqrt(n_v)).T]
             j, d = nearest[k]

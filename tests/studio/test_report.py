@@ -289,3 +289,32 @@ def test_a_loose_batch_reports_the_standing_height_as_its_stature():
     assert crouched["stature"]["flags"] == [LOOSE_FLAGS["joints"]] and "method" not in crouched["stature"]
     tight = use_batch_shape(table, model, shape, frames=[10, 11, 12], clothing="tight", poses=lifted)
     assert tight["stature"]["mean"] == pytest.approx(1000 * rest, abs=1e-6) and "method" not in tight["stature"]
+
+
+def test_heights_leave_out_sitting_and_squatting_frames_and_are_flagged_without_a_standing_one(session):
+    """Our model's hips shorten a seated or squatting body (pose benchmark: stature −26 to −34 mm
+    median): the heights are measured on the frames that stand, and ``suspect`` when none does;
+    the other measurements keep every frame."""
+    import dataclasses
+
+    from studio.fit import load_fits
+    from studio.fit.library import family_pose
+    from studio.report.measurements import BENT_FLAG, bent_frames
+
+    path, model, shape, cams = session
+    fits = load_fits(path)
+    postures = {name: dataclasses.replace(fits[0], pose=family_pose(model, name))
+                for name in ("a_pose", "t_pose", "walk", "run", "lunge", "wide_stance", "half_squat", "seated")}
+    assert bent_frames(model, postures) == {"half_squat", "seated"}
+    seated = dataclasses.replace(fits[1], pose=family_pose(model, "seated"))
+    clean = measurement_table(model, fits)
+    mixed = measurement_table(model, {0: fits[0], 1: seated})
+    row = mixed["stature"]
+    assert row["frames_used"] == [0] and row["status"] == "ok" and row["mean"] == row["per_frame"]["0"]
+    assert row["flags"] == ["1 sitting or squatting frame(s) left out of the mean"]
+    assert mixed["chest_circumference"]["frames_used"] == [0, 1] and not mixed["chest_circumference"]["flags"]
+    alone = measurement_table(model, {1: seated})
+    assert alone["stature"]["status"] == "suspect" and alone["stature"]["flags"] == [BENT_FLAG]
+    assert alone["knee_height"]["status"] == "suspect" and alone["waist_circumference"]["status"] == "ok"
+    assert clean["stature"]["frames_used"] == [0, 1]
+    assert not any("sit" in flag for r in clean.values() for flag in r["flags"])

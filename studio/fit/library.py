@@ -30,7 +30,7 @@ from numba import njit
 
 from studio.body.skeleton import JOINT_KIND, PART_NAMES, POSE_SIZE, pose_slices
 from studio.fit.quality import pool_any
-from studio.threads import chunk_ranges, map_chunks, threads
+from studio.threads import chunk_ranges, map_chunks
 
 __all__ = ["FAMILIES", "SCALES", "family_pose", "library_match", "library_scores", "pose_library", "stand_on_floor"]
 
@@ -208,8 +208,8 @@ def library_scores(points: np.ndarray, cameras, masks, yaws: np.ndarray, xy, *, 
             np.concatenate([c.ravel() for c in inside]), np.concatenate([c.ravel() for c in wanted]),
             np.array([max(int(c.sum()), 1) for c in wanted], dtype=np.float64), lights, plane,
             np.array([v[5] for v in views], dtype=np.float64))
-    share = -(-len(points) // threads())  # one range of bodies per thread: each body's scores are its own
-    parts = map_chunks(lambda r: _scores(points[r[0] : r[1]], *rest), chunk_ranges(len(points), share))
+    # one range of bodies per thread (chunk_ranges balances a single chunk over them): each body's scores are its own
+    parts = map_chunks(lambda r: _scores(points[r[0] : r[1]], *rest), chunk_ranges(len(points), len(points)))
     return np.concatenate(parts)
 
 

@@ -104,7 +104,9 @@ VARIANTS = {"full": {}, "no-library": {"start": "stride"}, "no-rival": {"rival_h
             "dev-seat-stature": {}, "seat-stature": {},
             # issue 13: the model's pose deformation on rotation entries minus I, learned also from wide
             # poses (not landed: git branch experiment/rmi-pose-deformation, its model file and kernel)
-            "dev-rmi": {}, "rmi": {}}
+            "dev-rmi": {}, "rmi": {},
+            # issue 13: the same at rank 8 per joint pair (the kernel's cost), a high final cost searched again
+            "dev-rmi8": {}, "rmi8": {}}
 STANDING = ("a_pose", "t_pose", "arms_overhead", "hands_on_hips", "arm_forward", "arms_crossed", "wide_stance",
             "torso_twist")
 

@@ -238,7 +238,8 @@ def test_mesh_io_rejects_bad_arrays_and_formats(tmp_path):
 
 def test_posed_edges_are_r_d_q_v_of_every_triangle(model):
     """eq. 3.11 term by term in float64 for a handful of triangles of every part: Q from its
-    regression on the two adjacent joints' rotation vectors (eq. 3.16), D from the shape
+    regression on the two adjacent joints' rotations (eq. 3.16: each rotation matrix's entries
+    minus the identity, :func:`studio.body.skeleton.joint_features`), D from the shape
     basis (eq. 3.22), R the part's rotation — against the compiled kernel the fit uses."""
     from studio.body import scape, skeleton
 
@@ -249,7 +250,9 @@ def test_posed_edges_are_r_d_q_v_of_every_triangle(model):
     P[:, 6:] = lim[6:, 0] + rng.uniform(0.2, 0.8, (2, 24)) * (lim[6:, 1] - lim[6:, 0])
     got = model._posed_edges(S, P)  # (B, 3, 2, F)
     G = model.part_rotations(P)
-    rv = skeleton.joint_rotvecs(G)
+    assert model.Q_coef.shape[1] == 19
+    rv = np.stack([[np.zeros(9)] + [(np.linalg.inv(g[parent]) @ g[p] - np.eye(3)).ravel()
+                                    for p, parent in enumerate(skeleton.PART_PARENTS) if parent >= 0] for g in G])
     edges = scape.triangle_edges(model.template, model.faces)  # (F, 3, 2)
     F = len(model.faces)
     faces = np.concatenate([np.flatnonzero(model.face_parts == p)[:3] for p in range(15)])
@@ -308,12 +311,48 @@ def test_planar_posed_edges_equal_the_per_face_kernel_bit_for_bit(n_bodies):
     shapes = rng.normal(size=(n_bodies, model.n_shape)) * np.sqrt(model.eigenvalues)
     poses = model.clip_pose(rng.normal(size=(n_bodies, POSE_SIZE)) * 0.5)
     G, rv = chain_rotations(poses, model.hinge_axes)
-    rv, G = rv.astype(np.float32), G.astype(np.float32)
+    rv, G = model._joint_features(G, rv), G.astype(np.float32)
     for D in (model._shape_gradients(shapes), model._shape_gradients(shapes[:1])):
         want = posed.posed_edges(rv, model._Qc, model.joint_pairs, D, G, model.face_parts)
         got = posed.posed_edges_planar(rv, posed.planar_q(model._Qc), model.joint_pairs, D, G, model._part_start)
         assert np.abs(want).max() > 0.01
         np.testing.assert_array_equal(got, want)
+
+
+def test_pose_deformation_of_either_width_loads_and_another_is_rejected():
+    """Q_coef on rotation vectors (F, 7, 9) or on rotation entries minus I (F, 19, 9, the shipped
+    model's); any other width is refused by name. A constant-only map of either width is the
+    rigid model."""
+    from studio.body.model import BodyModelError
+
+    pose = cube_model().default_pose()
+    pose[6:9] = [0.4, 0.1, 0.0]
+    rigid = cube_model().vertices(np.array([0.2]), pose)
+    for width in (7, 19):
+        Q = np.zeros((12, width, 9))
+        Q[:, -1] = np.eye(3).ravel()
+        np.testing.assert_allclose(cube_model(Q_coef=Q).vertices(np.array([0.2]), pose), rigid, atol=1e-9)
+    with pytest.raises(BodyModelError, match="Q_coef must be"):
+        cube_model(Q_coef=np.zeros((12, 11, 9)))
+    assert BodyModel.load("female").Q_coef.shape[1:] == (19, 9)
+
+
+def test_wide_training_poses_reach_what_a_lab_records():
+    """The build's wide poses stay inside the joint limits, cap ball joints at 2.6 rad, and reach
+    a seated hip (flexion beyond 1.2 rad) and arms overhead (abduction beyond 1.5 rad), which the
+    near-rest poses never do."""
+    from studio.body.build import sample_poses, sample_wide_poses
+
+    lim = BodyModel.load("female").pose_limits
+    wide = sample_wide_poses(400, lim, np.random.default_rng(0))
+    near = sample_poses(400, lim, np.random.default_rng(0))
+    assert np.all(wide >= lim[:, 0]) and np.all(wide <= lim[:, 1]) and np.all(wide[:, :6] == 0)
+    from studio.body.skeleton import pose_slices
+
+    hip, shoulder = (pose_slices()[PART_NAMES.index(n)] for n in ("upperleg_l", "upperarm_l"))
+    assert np.linalg.norm(wide[:, hip], axis=1).max() <= 2.6 + 1e-12
+    assert np.mean(wide[:, hip.start] < -1.2) > 0.15 and np.all(near[:, hip.start] > -1.2)
+    assert np.mean(wide[:, shoulder.start + 1] < -1.5) > 0.1 and np.all(near[:, shoulder.start + 1] > -1.5)
 
 
 def test_face_parts_out_of_range_are_rejected():

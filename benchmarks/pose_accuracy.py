@@ -105,8 +105,10 @@ VARIANTS = {"full": {}, "no-library": {"start": "stride"}, "no-rival": {"rival_h
             # issue 13: the model's pose deformation on rotation entries minus I, learned also from wide
             # poses (not landed: git branch experiment/rmi-pose-deformation, its model file and kernel)
             "dev-rmi": {}, "rmi": {},
-            # issue 13: the same at rank 8 per joint pair (the kernel's cost), a high final cost searched again
-            "dev-rmi8": {}, "rmi8": {}}
+            # issue 13: the same at rank 8 per joint pair (the kernel's cost); with a high final cost searched again (r)
+            "dev-rmi8": {}, "rmi8": {}, "dev-rmi8r": {}, "rmi8r": {},
+            # issue 13: a fit at a high silhouette cost for its silhouettes' size searched again
+            "dev-cost-retry": {}, "cost-retry": {}}
 STANDING = ("a_pose", "t_pose", "arms_overhead", "hands_on_hips", "arm_forward", "arms_crossed", "wide_stance",
             "torso_twist")
 

@@ -30,6 +30,11 @@ __all__ = ["BodyModel", "BodyModelError", "GENDERS", "DATA_FILE", "anny_correspo
 GENDERS = ("male", "female", "neutral")
 DATA_FILE = Path(__file__).resolve().parent / "data" / "scape_models.npz"
 _PELVIS = PART_NAMES.index("pelvis")
+#: regressors per joint pair of a pose deformation on rotation entries (18 features, eq. 3.16)
+#: in the fast kernel (:func:`studio.body.posed.low_rank_q`): the model's error at the lab
+#: postures 6.48 mm with all 18, 6.61 at 8 (6: 7.29); the kernel costs about as much as the
+#: rotation vectors' 6 (see :func:`studio.body.posed.posed_edges_planar`)
+Q_RANK = 8
 
 
 class BodyModelError(ValueError):
@@ -105,7 +110,17 @@ class BodyModel:
         rigid[:, -1] = self._edges
         self._Q_rigid = rigid
         self._Qc = rigid if self.Q_coef is None else posed.compact_q(self.Q_coef, self._edges)
-        self._Qp, self._Qp_rigid = posed.planar_q(self._Qc), posed.planar_q(rigid)  # faces last, for the kernel
+        self._Qp_rigid = posed.planar_q(rigid[:, -1:])  # faces last, for the kernel: no regressor
+        self._slots, self._slot = posed.pair_slots(self.joint_pairs)
+        self._Qp, self._Q_reduce = posed.planar_q(self._Qc), None
+        if self.Q_coef is not None and 2 * self._feature_size > Q_RANK:
+            # the faces of a joint pair deform in few directions: Q_RANK regressors per pair
+            # keep all but a few per cent of it at half the kernel's cost (posed.low_rank_q)
+            sample = skeleton.part_rotations(np.concatenate([
+                skeleton.sample_poses(300, self.pose_limits, np.random.default_rng(0)),
+                skeleton.sample_wide_poses(300, self.pose_limits, np.random.default_rng(1))]), self.hinge_axes)[0]
+            self._Qp, self._Q_reduce = posed.low_rank_q(self._Qc, self._slots, self._slot,
+                                                        skeleton.joint_features(sample), Q_RANK)
         self._part_start = np.searchsorted(self.face_parts, np.arange(len(PART_NAMES) + 1)).astype(np.int64)
         if self.face_parts.min() < 0 or self._part_start[-1] != F:
             raise BodyModelError(f"face_parts must lie in 0..{len(PART_NAMES) - 1}")
@@ -290,8 +305,11 @@ class BodyModel:
         else:
             G, rv = kinematics.chain_rotations(poses, self.hinge_axes)  # (B, 15, 3, 3), (B, 15, 3)
         D = self._shape_gradients(shapes, free)
-        return posed.posed_edges_planar(self._joint_features(G, rv), self._Qp if use_q else self._Qp_rigid,
-                                        self.joint_pairs, D, G.astype(np.float32), self._part_start)
+        if use_q:
+            x, Cp = posed.slot_regressors(self._joint_features(G, rv), self._slots, self._Q_reduce), self._Qp
+        else:
+            x, Cp = np.zeros((len(G), 1, 0), np.float32), self._Qp_rigid
+        return posed.posed_edges_planar(x, Cp, self._slot, D, G.astype(np.float32), self._part_start)
 
     def _generate(self, shapes: np.ndarray, poses: np.ndarray, use_q: bool = True,
                   free: int | None = None, reference: bool = False) -> np.ndarray:

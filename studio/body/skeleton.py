@@ -25,6 +25,8 @@ __all__ = [
     "joint_features",
     "joint_rotvecs",
     "default_limits",
+    "sample_poses",
+    "sample_wide_poses",
 ]
 
 PART_NAMES: tuple[str, ...] = (
@@ -136,6 +138,41 @@ def joint_features(G: np.ndarray) -> np.ndarray:
     out = np.zeros(G.shape[:-3] + (15, 9))
     out[..., 1:, :] = (rel - np.eye(3)).reshape(rel.shape[:-2] + (9,))
     return out
+
+
+def sample_poses(n: int, limits: np.ndarray, rng: np.random.Generator, spread: float = 0.6) -> np.ndarray:
+    """Random joint angles (n, POSE_SIZE), root fixed: hinges uniform in the central
+    ``spread`` of their range, ball joints within ±35 % of their half-range around rest."""
+    mid = limits.mean(axis=1)
+    half = 0.5 * (limits[:, 1] - limits[:, 0])
+    poses = mid + rng.uniform(-1, 1, size=(n, len(mid))) * half * spread
+    poses[:, :6] = 0.0
+    for p, kind in enumerate(JOINT_KIND):
+        s = pose_slices()[p]
+        if kind == "ball":  # the rest (0) lies inside every ball joint's box
+            poses[:, s] = rng.uniform(-1, 1, (n, 3)) * half[s] * 0.35
+    return np.clip(poses, limits[:, 0], limits[:, 1])
+
+
+def sample_wide_poses(n: int, limits: np.ndarray, rng: np.random.Generator, reach: float = 0.85,
+                      max_angle: float = 2.6) -> np.ndarray:
+    """Random joint angles (n, POSE_SIZE) across the whole range of every joint, root fixed.
+
+    What a lab records reaches far beyond :func:`sample_poses`' ±35 % around rest (a seated hip
+    flexed 90°, arms overhead, a half squat): every angle uniform in ``reach`` of its limits
+    (scaled about rest, which lies inside every box), ball joints' rotations capped at
+    ``max_angle`` rad. A triangle's deformation depends on its two nearest joints only
+    (eq. 3.16), so independent draws cover the pairs a posture combines.
+    """
+    lo, hi = limits[:, 0] * reach, limits[:, 1] * reach
+    poses = rng.uniform(lo, hi, size=(n, len(lo)))
+    poses[:, :6] = 0.0
+    for p, kind in enumerate(JOINT_KIND):
+        s = pose_slices()[p]
+        if kind == "ball":
+            norm = np.linalg.norm(poses[:, s], axis=1, keepdims=True)
+            poses[:, s] *= np.minimum(1.0, max_angle / np.maximum(norm, 1e-12))
+    return np.clip(poses, limits[:, 0], limits[:, 1])
 
 
 def default_limits(elbow_rest: float = 0.0) -> np.ndarray:

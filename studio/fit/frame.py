@@ -61,7 +61,7 @@ from studio.fit.options import FitOptions
 from studio.fit.polish import polish_frame
 from studio.fit.props import find_support
 from studio.fit.quality import fit_quality, refused_quality, screen_masks
-from studio.fit.result import FrameFit, explains_poorly, keep_best
+from studio.fit.result import FrameFit, keep_best, search_again
 from studio.fit.search import _arm_states, _heading, _part_groups, _partitioned_search, _partitions, _pose_sigma
 from studio.optimize import Stage, annealed_particle_filter, staged_nelder_mead, thesis_stages
 
@@ -414,8 +414,8 @@ def fit_frame(
         quality=quality,
     )
     retries = MONOCULAR_RETRIES if len(cameras) == 1 else options.retries
-    if previous_pose is None and _attempt < retries and explains_poorly(quality):
-        # a body that explains the silhouettes poorly is searched again with other random draws
+    if previous_pose is None and _attempt < retries and search_again(quality, cameras):
+        # a body that explains the silhouettes poorly (or at a high cost) is searched again with other random draws
         # (several views: from the library's other postures too) and the lower total cost is kept
         log.info("frame %d: the fitted body explains its views poorly: searching again", frame)
         avoid = _avoid + ((start_family,) if len(cameras) > 1 and start_family is not None else ())
@@ -425,7 +425,7 @@ def fit_frame(
         again = attempt(seed=np.random.default_rng(seed).integers(2**31), _attempt=_attempt + 1, _avoid=avoid)
         fit = keep_best(fit, again)
         if (_attempt == 0 and len(cameras) > 1 and match is not None and shape is None
-                and explains_poorly(fit.quality)):
+                and search_again(fit.quality, cameras)):
             # flagged again: once more from the library's other postures, each at its own stature
             avoid += tuple(f for f in (again.costs.get("start_family"),) if f is not None)
             last = attempt(seed=np.random.default_rng(seed).integers(2**31, size=2)[1], _attempt=retries,

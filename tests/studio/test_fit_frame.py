@@ -229,3 +229,28 @@ def test_overlay_colours():
     assert tuple(out[0, 1]) == OVERLAY_COLORS["model only"]
     assert tuple(out[1, 0]) == OVERLAY_COLORS["image only"]
     assert tuple(out[1, 1]) == (90, 90, 90)
+
+
+def test_a_fit_at_a_high_cost_for_its_silhouettes_size_is_searched_again_whatever_the_resolution():
+    """The retry's cost test (``relative_cost``): each view's silhouette cost over the square
+    root of its silhouette's area, averaged over the views with a silhouette. The same fit at
+    twice the resolution (costs in pixels × 2, areas × 4) gives the same figure; a good fit of
+    the benchmark's rig (cost 0.06 per view at 3.4 % of 656 × 490) is not searched again, nor at
+    twice the cost; at 4 times it is, and so is one the agreement gates flag."""
+    from studio.fit.result import RETRY_RELATIVE_COST, relative_cost, search_again
+
+    cams = ring_cameras(size=(656, 490))
+    views = {c.name: {"cost": 0.06, "coverage": 0.034, "precision": 0.97, "recall": 0.97} for c in cams}
+    views[cams[-1].name] = {"cost": float("nan"), "coverage": 0.0}  # an empty view does not count
+    good = {"views": views, "reasons": []}
+    r = relative_cost(good, cams)
+    assert r == pytest.approx(0.06 / np.sqrt(0.034 * 656 * 490))
+    big = ring_cameras(size=(1312, 980))
+    doubled = {"views": {k: {**v, "cost": 2 * v["cost"]} for k, v in views.items()}, "reasons": []}
+    assert relative_cost(doubled, big) == pytest.approx(r)
+    assert 2 * r < RETRY_RELATIVE_COST < 4 * r
+    assert not search_again(good, cams)
+    costly = {"views": {k: {**v, "cost": 4 * v["cost"]} for k, v in views.items()}, "reasons": []}
+    assert search_again(costly, cams)
+    flagged = {**good, "reasons": [{"check": "agreement", "severity": "suspect", "view": None, "message": ""}]}
+    assert search_again(flagged, cams)

@@ -76,6 +76,8 @@ def generalisation(results: dict) -> None:
 
 
 def pose_error(results: dict) -> None:
+    """The reference body (the template, D = I) in the build's held-out poses, near rest and
+    across each joint's whole range (``wide_``), against Anny's skinning: Q = I vs the regressed Q."""
     z = np.load(SCRATCH / "heldout_poses.npz")
     neutral = BodyModel.load("neutral")
     F = len(neutral.faces)
@@ -87,28 +89,64 @@ def pose_error(results: dict) -> None:
         pose_limits=neutral.pose_limits, joint_regressor=neutral.joint_regressor,
         joint_pairs=neutral.joint_pairs, Q_coef=neutral.Q_coef,
     )
-    truth = z["vertices"].astype(np.float64)
-    poses = z["poses"]
-    s = np.zeros((len(poses), 1))
-    out = {}
-    for name, use_q in (("rigid_Q=I", False), ("with_Q", True)):
-        V = ref.vertices_batch(s, poses, use_q=use_q)
-        err = aligned_error(V, truth)
-        # error near the joints (vertices within 8 cm of a rest joint centre)
-        J = ref.joint_regressor @ ref.template
-        near = np.min(np.linalg.norm(ref.template[:, None] - J[None], axis=-1), axis=1) < 0.08
-        d = V - truth
-        d = d - d.mean(axis=1, keepdims=True)
-        near_err = np.linalg.norm(d[:, near], axis=-1).mean()
-        out[name] = {"mean_mm": float(err.mean() * 1000), "max_body_mm": float(err.max() * 1000),
-                     "near_joints_mm": float(near_err * 1000)}
-    rest = aligned_error(np.broadcast_to(ref.template, truth.shape), truth)
-    out["unposed_template_mm"] = float(rest.mean() * 1000)
-    out["n_poses"] = int(len(poses))
-    results["pose_mm"] = out
-    print(f"\nPose: mean vertex error vs Anny's skinning, {len(poses)} held-out poses of the reference body")
-    for k, v in out.items():
-        print(f"  {k:22s} {v}")
+    J = ref.joint_regressor @ ref.template
+    near = np.min(np.linalg.norm(ref.template[:, None] - J[None], axis=-1), axis=1) < 0.08
+    for key, label in (("", "pose_mm"), ("wide_", "wide_pose_mm")):
+        if key + "poses" not in z.files:
+            continue
+        truth = z[key + "vertices"].astype(np.float64)
+        poses = z[key + "poses"]
+        s = np.zeros((len(poses), 1))
+        out = {}
+        for name, use_q in (("rigid_Q=I", False), ("with_Q", True)):
+            V = ref.vertices_batch(s, poses, use_q=use_q)
+            err = aligned_error(V, truth)
+            # error near the joints (vertices within 8 cm of a rest joint centre)
+            d = V - truth
+            d = d - d.mean(axis=1, keepdims=True)
+            near_err = np.linalg.norm(d[:, near], axis=-1).mean()
+            out[name] = {"mean_mm": float(err.mean() * 1000), "max_body_mm": float(err.max() * 1000),
+                         "near_joints_mm": float(near_err * 1000)}
+        rest = aligned_error(np.broadcast_to(ref.template, truth.shape), truth)
+        out["unposed_template_mm"] = float(rest.mean() * 1000)
+        out["n_poses"] = int(len(poses))
+        results[label] = out
+        print(f"\nPose: mean vertex error vs Anny's skinning, {len(poses)} held-out {key or 'near-rest '}poses"
+              " of the reference body")
+        for k, v in out.items():
+            print(f"  {k:22s} {v}")
+
+
+def lab_postures(results: dict) -> None:
+    """The pose library's families (what a lab records: seated, arms overhead, half squat, ...) on
+    4 + 4 held-out adults at the true pose, model vs Anny's posing of the same person (shape
+    fitted at rest, no alignment): with the regressed Q and rigid (Q = I)."""
+    try:
+        from studio.body.anny_adapter import anny_truth_meshes
+    except ImportError:
+        return
+    from studio.fit.library import pose_library
+
+    errs: dict[str, dict[str, list]] = {"with_Q": {}, "rigid_Q=I": {}}
+    for g in ("male", "female"):
+        m = BodyModel.load(g)
+        phen = np.load(SCRATCH / f"heldout_{g}.npz")["phenotypes"][:4]
+        P, names = pose_library(m, variants=2)
+        P, names = P[::2], names[::2]  # without the mirror twins
+        beta = m.shape_from_vertices(anny_truth_meshes(phen, np.zeros((len(phen), P.shape[1])))["vertices"])
+        for i in range(len(phen)):
+            truth = anny_truth_meshes(np.repeat(phen[i : i + 1], len(P), 0), P)["vertices"]
+            for name, use_q in (("with_Q", True), ("rigid_Q=I", False)):
+                V = m.vertices_batch(np.repeat(beta[i : i + 1], len(P), 0), P, use_q=use_q)
+                for fam, e in zip(names, np.linalg.norm(V - truth, axis=-1).mean(axis=1)):
+                    errs[name].setdefault(fam, []).append(float(e * 1000))
+    out = {k: {fam: float(np.mean(v)) for fam, v in d.items()} for k, d in errs.items()}
+    for k in out:
+        out[k]["mean"] = float(np.mean(list(out[k].values())))
+    results["lab_postures_mm"] = out
+    print("\nLab postures: mean vertex error (mm) vs Anny at the true pose, 8 held-out adults")
+    for fam in out["with_Q"]:
+        print(f"  {fam:16s} {out['with_Q'][fam]:6.2f}   (rigid {out['rigid_Q=I'][fam]:6.2f})")
 
 
 def lab_postures(results: dict) -> None:

@@ -26,7 +26,7 @@ from pathlib import Path
 import numpy as np
 
 from studio.body import scape, skeleton
-from studio.body.skeleton import JOINT_KIND, PART_NAMES, PART_PARENTS
+from studio.body.skeleton import PART_NAMES, PART_PARENTS, sample_poses, sample_wide_poses
 from studio.body.anny_adapter import (
     PART_FIRST_BONE,
     _Anny,
@@ -135,20 +135,6 @@ def _hinge_axes(joints: np.ndarray) -> tuple[np.ndarray, float]:
     return ax, float(np.mean(bends))
 
 
-def sample_poses(n: int, limits: np.ndarray, rng: np.random.Generator, spread: float = 0.6) -> np.ndarray:
-    """Random joint angles (n, POSE_SIZE), root fixed: hinges uniform in the central
-    ``spread`` of their range, ball joints within ±35 % of their half-range around rest."""
-    mid = limits.mean(axis=1)
-    half = 0.5 * (limits[:, 1] - limits[:, 0])
-    poses = mid + rng.uniform(-1, 1, size=(n, len(mid))) * half * spread
-    poses[:, :6] = 0.0
-    for p, kind in enumerate(JOINT_KIND):
-        s = skeleton.pose_slices()[p]
-        if kind == "ball":  # the rest (0) lies inside every ball joint's box
-            poses[:, s] = rng.uniform(-1, 1, (n, 3)) * half[s] * 0.35
-    return np.clip(poses, limits[:, 0], limits[:, 1])
-
-
 # ----------------------------------------------------------------------------- main build
 def build_models(
     out_dir: Path,
@@ -156,6 +142,7 @@ def build_models(
     n_train: int = 600,
     n_test: int = 100,
     n_poses: int = 100,
+    n_wide_poses: int = 100,
     n_components: int = 30,
     n_pose_bodies: int = 6,
     scratch: Path | None = None,
@@ -273,11 +260,17 @@ def build_models(
     joints_t = Wj @ X
     hinge_axes, elbow_rest = _hinge_axes(heads0[part_joint_bone])
     limits = skeleton.default_limits(elbow_rest)
-    say(f"posing the template body and {n_pose_bodies - 1} adults in {n_poses} poses each")
-    poses = sample_poses(n_poses, limits, rng)
+    say(f"posing the template body and {n_pose_bodies - 1} adults in {n_poses} + {n_wide_poses} wide poses each")
+    # near rest, and across each joint's whole range (its own stream: the rest of the build
+    # draws the same numbers whatever n_wide_poses is)
+    poses = np.concatenate([sample_poses(n_poses, limits, rng),
+                            sample_wide_poses(n_wide_poses, limits, np.random.default_rng([seed, 1]))])
     G, _ = skeleton.part_rotations(poses, hinge_axes)
     pairs = _joint_pairs(fpart, X[Ft].mean(axis=1), joints_t)
     n_fit = max(1, n_poses - max(n_poses // 4, 10))
+    n_wide_fit = n_wide_poses - n_wide_poses // 4
+    fit = np.r_[:n_fit, n_poses : n_poses + n_wide_fit]
+    held = {"": np.r_[n_fit:n_poses], "wide_": np.r_[n_poses + n_wide_fit : len(poses)]}
     # pose bodies: the template itself (D = I, the thesis' single subject) and adults of the
     # three training populations; for each, Q = D⁻¹·Rᵀ·A (eq. 3.11 solved for Q), so that
     # the regressed Q transfers across shapes
@@ -285,41 +278,39 @@ def build_models(
     for i in range(n_pose_bodies - 1):
         ph, lo = pop_samples[("male", "female", "neutral")[i % 3]]
         bodies.append((ph[i // 3], lo[i // 3]))
-    Q_all, rv_all = [], []
+    Q_all, feats_all = [], []
     for b, (ph, lo) in enumerate(bodies):
         Vb, hb, _ = anny.rest(ph[None], lo[None])
         Vb, hb = Vb[0], hb[0]
         Yb = M @ Vb
         Db_inv = np.linalg.inv(scape.triangle_frames(Yb, Ft) @ frames_inv)  # (F, 3, 3)
-        T = anny_bone_transforms(anny, np.broadcast_to(hb, (n_poses,) + hb.shape), G, part_joint_bone)
-        Vp = anny.skin(np.broadcast_to(Vb, (n_poses,) + Vb.shape).copy(), T)
+        T = anny_bone_transforms(anny, np.broadcast_to(hb, (len(poses),) + hb.shape), G, part_joint_bone)
+        Vp = anny.skin(np.broadcast_to(Vb, (len(poses),) + Vb.shape).copy(), T)
         Yp = np.stack([M @ v for v in Vp])
         # the part rotations are known here (we posed Anny with them): use them rather than
         # Procrustes estimates (App. C), so that training matches evaluation, where R comes
         # from the pose vector
-        Rp = G
-        A = np.einsum("bfij,fjk->bfik", scape.triangle_frames(Yp[:n_fit], Ft), frames_inv)
-        RtA = np.einsum("bfji,bfjk->bfik", Rp[:n_fit, fpart], A)
+        Rp = G[fit]
+        A = np.einsum("bfij,fjk->bfik", scape.triangle_frames(Yp[fit], Ft), frames_inv)
+        RtA = np.einsum("bfji,bfjk->bfik", Rp[:, fpart], A)
         Q_all.append(np.einsum("fij,bfjk->bfik", Db_inv, RtA).astype(np.float32))
-        rv_all.append(skeleton.joint_rotvecs(Rp[:n_fit]))
+        feats_all.append(skeleton.joint_features(Rp))
         if b == 0:
             Yp_ref = Yp
-    coef = scape.fit_pose_deformation(np.concatenate(Q_all).astype(np.float64), np.concatenate(rv_all), pairs)
+    coef = scape.fit_pose_deformation(np.concatenate(Q_all).astype(np.float64), np.concatenate(feats_all), pairs)
     del Q_all
     Yp = Yp_ref
     if scratch is not None:
-        np.savez_compressed(
-            scratch / "heldout_poses.npz",
-            poses=poses[n_fit:],
-            vertices=Yp[n_fit:].astype(np.float32),
-            joints=np.stack(
-                [anny_joint_positions(heads0[part_joint_bone], G[i]) for i in range(n_fit, n_poses)]
-            ),
-            rest=X.astype(np.float32),
-        )
+        sets = {}
+        for key, idx in held.items():
+            sets.update({f"{key}poses": poses[idx], f"{key}vertices": Yp[idx].astype(np.float32),
+                         f"{key}joints": np.stack([anny_joint_positions(heads0[part_joint_bone], G[i]) for i in idx])})
+        np.savez_compressed(scratch / "heldout_poses.npz", rest=X.astype(np.float32), **sets)
     summary["poses_train"] = int(n_fit)
+    summary["wide_poses_train"] = int(n_wide_fit)
     summary["pose_bodies"] = int(n_pose_bodies)
     summary["poses_heldout"] = int(n_poses - n_fit)
+    summary["wide_poses_heldout"] = int(n_wide_poses - n_wide_fit)
 
     arrays.update(
         template=X.astype(np.float64),

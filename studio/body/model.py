@@ -30,6 +30,11 @@ __all__ = ["BodyModel", "BodyModelError", "GENDERS", "DATA_FILE", "anny_correspo
 GENDERS = ("male", "female", "neutral")
 DATA_FILE = Path(__file__).resolve().parent / "data" / "scape_models.npz"
 _PELVIS = PART_NAMES.index("pelvis")
+#: regressors per joint pair of a pose deformation on rotation entries (18 features, eq. 3.16)
+#: in the fast kernel (:func:`studio.body.posed.low_rank_q`): the model's error at the lab
+#: postures 6.48 mm with all 18, 6.61 at 8 (6: 7.29); the kernel costs about as much as the
+#: rotation vectors' 6 (see :func:`studio.body.posed.posed_edges_planar`)
+Q_RANK = 8
 
 
 class BodyModelError(ValueError):
@@ -61,7 +66,7 @@ class BodyModel:
     pose_limits: np.ndarray  # (POSE_SIZE, 2)
     joint_regressor: np.ndarray  # (15, V)
     joint_pairs: np.ndarray  # (F, 2)
-    Q_coef: np.ndarray | None  # (F, 7, 9) or None for a rigid (Q = I) model
+    Q_coef: np.ndarray | None  # (F, 7 or 19, 9) (eq. 3.16 on K = 3 or 9 joint features) or None: rigid (Q = I)
     measurement_samples: tuple[np.ndarray, np.ndarray] | None = None  # for the inverse map
     D_weights: np.ndarray | None = None  # (F,) metric of the shape PCA (triangle areas)
     part_names: tuple[str, ...] = PART_NAMES
@@ -94,13 +99,28 @@ class BodyModel:
         K = self.D_basis.shape[0]
         self._Dm = np.ascontiguousarray(self.D_mean.reshape(F, 9).T).reshape(9 * F)
         self._Db = np.ascontiguousarray(self.D_basis.reshape(K, F, 9).transpose(0, 2, 1)).reshape(K, 9 * F)
-        # Q·v per triangle: linear in its two adjacent joints' rotation vectors and a 1 (eq. 3.16);
-        # a rigid model (or use_q=False) keeps only the constant term, the template's own edges
-        rigid = np.zeros((F, 7, 3, 2), np.float32)
-        rigid[:, 6] = self._edges
+        # Q·v per triangle: linear in its two adjacent joints' features and a 1 (eq. 3.16): their
+        # rotation vectors (K = 3, (F, 7, 9) coefficients) or rotation entries minus I (K = 9,
+        # (F, 19, 9)); a rigid model (or use_q=False) keeps only the constant term, the template's edges
+        n_reg = 7 if self.Q_coef is None else self.Q_coef.shape[1]
+        if self.Q_coef is not None and (self.Q_coef.shape[0] != F or n_reg not in (7, 19)):
+            raise BodyModelError(f"Q_coef must be ({F}, 7 or 19, 9), got {self.Q_coef.shape}")
+        self._feature_size = (n_reg - 1) // 2
+        rigid = np.zeros((F, n_reg, 3, 2), np.float32)
+        rigid[:, -1] = self._edges
         self._Q_rigid = rigid
         self._Qc = rigid if self.Q_coef is None else posed.compact_q(self.Q_coef, self._edges)
-        self._Qp, self._Qp_rigid = posed.planar_q(self._Qc), posed.planar_q(rigid)  # faces last, for the kernel
+        self._Qp_rigid = posed.planar_q(rigid[:, -1:])  # faces last, for the kernel: no regressor
+        self._slots, self._slot = posed.pair_slots(self.joint_pairs)
+        self._Qp, self._Q_reduce = posed.planar_q(self._Qc), None
+        if self.Q_coef is not None and 2 * self._feature_size > Q_RANK:
+            # the faces of a joint pair deform in few directions: Q_RANK regressors per pair
+            # keep all but a few per cent of it at half the kernel's cost (posed.low_rank_q)
+            sample = skeleton.part_rotations(np.concatenate([
+                skeleton.sample_poses(300, self.pose_limits, np.random.default_rng(0)),
+                skeleton.sample_wide_poses(300, self.pose_limits, np.random.default_rng(1))]), self.hinge_axes)[0]
+            self._Qp, self._Q_reduce = posed.low_rank_q(self._Qc, self._slots, self._slot,
+                                                        skeleton.joint_features(sample), Q_RANK)
         self._part_start = np.searchsorted(self.face_parts, np.arange(len(PART_NAMES) + 1)).astype(np.int64)
         if self.face_parts.min() < 0 or self._part_start[-1] != F:
             raise BodyModelError(f"face_parts must lie in 0..{len(PART_NAMES) - 1}")
@@ -110,7 +130,7 @@ class BodyModel:
         self._pelvis_idx = np.nonzero(self.parts == _PELVIS)[0]
         # rest-pose meshes are linear in the shape coefficients: precompute the basis
         Dall = np.concatenate([self._Dm[None], self._Db]).astype(np.float64).reshape(K + 1, 3, 3, F)
-        w0 = np.moveaxis(self._Qc[:, 6], 0, -1).astype(np.float64)  # (3, 2, F): Q·v at the rest pose
+        w0 = np.moveaxis(self._Qc[:, -1], 0, -1).astype(np.float64)  # (3, 2, F): Q·v at the rest pose
         E = np.einsum("bijf,jkf->bikf", Dall, w0)
         sol = self._solver.solve_planar_reference(E)  # once per model: the previous releases' basis, bit for bit
         self._rest_mean = sol[0] - sol[0][self._pelvis_idx].mean(axis=0)
@@ -265,19 +285,31 @@ class BodyModel:
             cached = self._D_base = (key, self._Dm + tail.astype(np.float32) @ self._Db[free:])
         return cached[1]
 
+    def _joint_features(self, G: np.ndarray, rotvecs: np.ndarray | None = None) -> np.ndarray:
+        """The pose deformation's regressors per joint (B, 15, K) float32 (eq. 3.16) from the
+        part rotations ``G``: rotation entries minus I (K = 9), or the rotation vectors (K = 3,
+        ``rotvecs`` when already known)."""
+        if self._feature_size == 9:
+            f = skeleton.joint_features(G)
+        else:
+            f = skeleton.joint_rotvecs(G) if rotvecs is None else rotvecs
+        return f.astype(np.float32)
+
     def _posed_edges(self, shapes: np.ndarray, poses: np.ndarray, use_q: bool = True,
                      free: int | None = None, reference: bool = False) -> np.ndarray:
         """Target edges R·D·Q·v (eq. 3.11), planar (B, 3, 2, F) float32 (:mod:`studio.body.posed`);
         the rotations by the compiled chain (:mod:`studio.body.kinematics`), or with
         ``reference`` by SciPy (:func:`studio.body.skeleton.part_rotations`)."""
         if reference:
-            G = self.part_rotations(poses)  # (B, 15, 3, 3)
-            rv = skeleton.joint_rotvecs(G)
+            G, rv = self.part_rotations(poses), None  # (B, 15, 3, 3)
         else:
             G, rv = kinematics.chain_rotations(poses, self.hinge_axes)  # (B, 15, 3, 3), (B, 15, 3)
         D = self._shape_gradients(shapes, free)
-        return posed.posed_edges_planar(rv.astype(np.float32), self._Qp if use_q else self._Qp_rigid,
-                                        self.joint_pairs, D, G.astype(np.float32), self._part_start)
+        if use_q:
+            x, Cp = posed.slot_regressors(self._joint_features(G, rv), self._slots, self._Q_reduce), self._Qp
+        else:
+            x, Cp = np.zeros((len(G), 1, 0), np.float32), self._Qp_rigid
+        return posed.posed_edges_planar(x, Cp, self._slot, D, G.astype(np.float32), self._part_start)
 
     def _generate(self, shapes: np.ndarray, poses: np.ndarray, use_q: bool = True,
                   free: int | None = None, reference: bool = False) -> np.ndarray:

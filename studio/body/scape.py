@@ -150,38 +150,41 @@ class PoissonSolver:
         return Y.reshape(lead + (self.n_vertices, 3))
 
 
-def pose_features(rotvecs: np.ndarray, joint_pairs: np.ndarray) -> np.ndarray:
-    """Regressors of eq. 3.16: the two adjacent joints' rotation vectors and a 1.
+def pose_features(joint_feats: np.ndarray, joint_pairs: np.ndarray) -> np.ndarray:
+    """Regressors of eq. 3.16: the two adjacent joints' features and a 1.
 
-    ``rotvecs`` (..., J, 3), ``joint_pairs`` (F, 2) → (..., F, 7).
+    ``joint_feats`` (..., J, K): the joints' rotation vectors (K = 3, the thesis' eq. 3.15) or
+    their rotations' entries minus the identity (K = 9, :func:`studio.body.skeleton.joint_features`);
+    ``joint_pairs`` (F, 2) → (..., F, 2K + 1).
     """
-    a = rotvecs[..., joint_pairs[:, 0], :]
-    b = rotvecs[..., joint_pairs[:, 1], :]
+    a = joint_feats[..., joint_pairs[:, 0], :]
+    b = joint_feats[..., joint_pairs[:, 1], :]
     one = np.ones(a.shape[:-1] + (1,))
     return np.concatenate([a, b, one], axis=-1)
 
 
 def fit_pose_deformation(
-    Q: np.ndarray, rotvecs: np.ndarray, joint_pairs: np.ndarray, ridge: float = 1e-3, rest_identity: bool = True
+    Q: np.ndarray, joint_feats: np.ndarray, joint_pairs: np.ndarray, ridge: float = 1e-3, rest_identity: bool = True
 ) -> np.ndarray:
     """Linear regression of Q on adjacent joint rotations (eq. 3.17).
 
-    ``Q`` (N, F, 3, 3) example deformations, ``rotvecs`` (N, J, 3) → coefficients (F, 7, 9).
-    With ``rest_identity`` the intercept is fixed to the identity, so that the template's
-    own (rest) pose has Q = I exactly and only the 6 slopes are fitted.
+    ``Q`` (N, F, 3, 3) example deformations, ``joint_feats`` (N, J, K) (:func:`pose_features`)
+    → coefficients (F, 2K + 1, 9). With ``rest_identity`` the intercept is fixed to the
+    identity, so that the template's own (rest) pose, where every feature is 0, has Q = I
+    exactly and only the 2K slopes are fitted.
     """
-    X = pose_features(rotvecs, joint_pairs)  # (N, F, 7)
+    X = pose_features(joint_feats, joint_pairs)  # (N, F, 2K + 1)
     Y = Q.reshape(Q.shape[:2] + (9,))  # (N, F, 9)
     eye = np.eye(3).ravel()
     if rest_identity:
-        X = X[..., :6]
+        X = X[..., :-1]
         Y = Y - eye
     k = X.shape[-1]
     Xf = np.transpose(X, (1, 0, 2))  # (F, N, k)
     Yf = np.transpose(Y, (1, 0, 2))
     reg = ridge * np.eye(k)
     if not rest_identity:
-        reg[6, 6] = 0.0
+        reg[-1, -1] = 0.0
     XtX = np.swapaxes(Xf, 1, 2) @ Xf + reg
     XtY = np.swapaxes(Xf, 1, 2) @ Yf
     coef = np.linalg.solve(XtX, XtY)
@@ -190,9 +193,9 @@ def fit_pose_deformation(
     return coef
 
 
-def pose_deformation(coef: np.ndarray, rotvecs: np.ndarray, joint_pairs: np.ndarray) -> np.ndarray:
-    """Q of eq. 3.16 from joint rotation vectors: (..., J, 3) → (..., F, 3, 3)."""
-    X = pose_features(rotvecs, joint_pairs)  # (..., F, 7)
+def pose_deformation(coef: np.ndarray, joint_feats: np.ndarray, joint_pairs: np.ndarray) -> np.ndarray:
+    """Q of eq. 3.16 from the joints' features (:func:`pose_features`): (..., J, K) → (..., F, 3, 3)."""
+    X = pose_features(joint_feats, joint_pairs)  # (..., F, 2K + 1)
     q = np.einsum("...fk,fkn->...fn", X, coef)
     return q.reshape(q.shape[:-1] + (3, 3))
 

@@ -22,8 +22,11 @@ __all__ = [
     "POSE_SIZE",
     "pose_slices",
     "part_rotations",
+    "joint_features",
     "joint_rotvecs",
     "default_limits",
+    "sample_poses",
+    "sample_wide_poses",
 ]
 
 PART_NAMES: tuple[str, ...] = (
@@ -117,6 +120,59 @@ def joint_rotvecs(G: np.ndarray) -> np.ndarray:
     out = np.zeros(G.shape[:-2] + (3,))
     out[..., 1:, :] = matrix_to_rotvec(rel)
     return out
+
+
+def joint_features(G: np.ndarray) -> np.ndarray:
+    """Relative rotations between adjacent parts as their matrices' entries minus the identity
+    (..., 15, 9) (root row: zeros): the pose deformation's regressors (eq. 3.16 with these in
+    place of the rotation vectors, as SMPL's pose blend shapes take them).
+
+    Rotation vectors enter Q linearly, which holds near rest only: over a lab's postures
+    (measured on 4 + 4 held-out Anny adults in the pose library's 14 families at the true pose,
+    the regression trained on the same poses) they leave 8.6 mm mean vertex error, 21.6 mm
+    seated and 15.5 mm arms overhead; these features, whose entries are the sines and
+    (1 − cos) of the angles, 6.5 mm, 15.0 and 7.4.
+    """
+    parents = np.array(PART_PARENTS[1:])
+    rel = np.swapaxes(G[..., parents, :, :], -1, -2) @ G[..., 1:, :, :]
+    out = np.zeros(G.shape[:-3] + (15, 9))
+    out[..., 1:, :] = (rel - np.eye(3)).reshape(rel.shape[:-2] + (9,))
+    return out
+
+
+def sample_poses(n: int, limits: np.ndarray, rng: np.random.Generator, spread: float = 0.6) -> np.ndarray:
+    """Random joint angles (n, POSE_SIZE), root fixed: hinges uniform in the central
+    ``spread`` of their range, ball joints within ±35 % of their half-range around rest."""
+    mid = limits.mean(axis=1)
+    half = 0.5 * (limits[:, 1] - limits[:, 0])
+    poses = mid + rng.uniform(-1, 1, size=(n, len(mid))) * half * spread
+    poses[:, :6] = 0.0
+    for p, kind in enumerate(JOINT_KIND):
+        s = pose_slices()[p]
+        if kind == "ball":  # the rest (0) lies inside every ball joint's box
+            poses[:, s] = rng.uniform(-1, 1, (n, 3)) * half[s] * 0.35
+    return np.clip(poses, limits[:, 0], limits[:, 1])
+
+
+def sample_wide_poses(n: int, limits: np.ndarray, rng: np.random.Generator, reach: float = 0.85,
+                      max_angle: float = 2.6) -> np.ndarray:
+    """Random joint angles (n, POSE_SIZE) across the whole range of every joint, root fixed.
+
+    What a lab records reaches far beyond :func:`sample_poses`' ±35 % around rest (a seated hip
+    flexed 90°, arms overhead, a half squat): every angle uniform in ``reach`` of its limits
+    (scaled about rest, which lies inside every box), ball joints' rotations capped at
+    ``max_angle`` rad. A triangle's deformation depends on its two nearest joints only
+    (eq. 3.16), so independent draws cover the pairs a posture combines.
+    """
+    lo, hi = limits[:, 0] * reach, limits[:, 1] * reach
+    poses = rng.uniform(lo, hi, size=(n, len(lo)))
+    poses[:, :6] = 0.0
+    for p, kind in enumerate(JOINT_KIND):
+        s = pose_slices()[p]
+        if kind == "ball":
+            norm = np.linalg.norm(poses[:, s], axis=1, keepdims=True)
+            poses[:, s] *= np.minimum(1.0, max_angle / np.maximum(norm, 1e-12))
+    return np.clip(poses, limits[:, 0], limits[:, 1])
 
 
 def default_limits(elbow_rest: float = 0.0) -> np.ndarray:

@@ -16,6 +16,8 @@ def test_model_build_rejects_too_few_poses(capsys):
     assert "--poses must be at least 80" in capsys.readouterr().err
     assert main(["model", "build", "--train", "5", "--out", "unused"]) == 1
     assert "--train must be at least 40" in capsys.readouterr().err
+    assert main(["model", "build", "--wide-poses", "-1", "--out", "unused"]) == 1
+    assert "--wide-poses must be 0 or more" in capsys.readouterr().err
 
 
 def test_model_build_without_the_build_extra_says_what_to_install(monkeypatch, capsys):

@@ -58,6 +58,7 @@ def test_mesh_through_the_chain_equals_the_scipy_chain(model):
     shapes = rng.normal(size=(3, model.n_shape)) * np.sqrt(model.eigenvalues)
     poses = model.clip_pose(rng.normal(size=(3, skeleton.POSE_SIZE)) * 0.5)
     G, rv = _reference(poses, model.hinge_axes)
-    e = posed.posed_edges(rv.astype(np.float32), model._Qc, model.joint_pairs, model._shape_gradients(shapes),
-                          G.astype(np.float32), model.face_parts)
+    x = posed.slot_regressors(model._joint_features(G, rv), model._slots, model._Q_reduce)
+    e = posed.posed_edges_planar(x, model._Qp, model._slot, model._shape_gradients(shapes), G.astype(np.float32),
+                                 model._part_start)
     np.testing.assert_allclose(model._posed_edges(shapes, poses), e, rtol=0, atol=1e-6)

@@ -238,18 +238,23 @@ def test_mesh_io_rejects_bad_arrays_and_formats(tmp_path):
 
 def test_posed_edges_are_r_d_q_v_of_every_triangle(model):
     """eq. 3.11 term by term in float64 for a handful of triangles of every part: Q from its
-    regression on the two adjacent joints' rotation vectors (eq. 3.16), D from the shape
-    basis (eq. 3.22), R the part's rotation — against the compiled kernel the fit uses."""
-    from studio.body import scape, skeleton
+    regression on the two adjacent joints' rotations (eq. 3.16: each rotation matrix's entries
+    minus the identity, :func:`studio.body.skeleton.joint_features`), D from the shape
+    basis (eq. 3.22), R the part's rotation — against the compiled kernel with the full map
+    (the fit's reduced map is held to it below)."""
+    from studio.body import posed, scape, skeleton
 
     rng = np.random.default_rng(7)
     S = model.sample_shapes(2, rng)
     P = np.tile(model.default_pose(), (2, 1))
     lim = model.pose_limits
     P[:, 6:] = lim[6:, 0] + rng.uniform(0.2, 0.8, (2, 24)) * (lim[6:, 1] - lim[6:, 0])
-    got = model._posed_edges(S, P)  # (B, 3, 2, F)
     G = model.part_rotations(P)
-    rv = skeleton.joint_rotvecs(G)
+    got = posed.posed_edges_planar(posed.slot_regressors(model._joint_features(G), model._slots), posed.planar_q(model._Qc),
+                                   model._slot, model._shape_gradients(S), G.astype(np.float32), model._part_start)
+    assert model.Q_coef.shape[1] == 19
+    rv = np.stack([[np.zeros(9)] + [(np.linalg.inv(g[parent]) @ g[p] - np.eye(3)).ravel()
+                                    for p, parent in enumerate(skeleton.PART_PARENTS) if parent >= 0] for g in G])
     edges = scape.triangle_edges(model.template, model.faces)  # (F, 3, 2)
     F = len(model.faces)
     faces = np.concatenate([np.flatnonzero(model.face_parts == p)[:3] for p in range(15)])
@@ -298,8 +303,8 @@ def test_free_shape_hint_equals_the_full_shape_deformation():
 
 @pytest.mark.parametrize("n_bodies", [1, 16])
 def test_planar_posed_edges_equal_the_per_face_kernel_bit_for_bit(n_bodies):
-    """The model's kernel (maps faces last, part by part, blocks shared by the batch) gives
-    the per-face kernel's float32 edges exactly, with one shared or one D per body."""
+    """The model's kernel (maps faces last, part by part, regressors per joint pair) with the
+    full map gives the per-face kernel's float32 edges exactly, with one shared or one D per body."""
     from studio.body import posed
     from studio.body.kinematics import chain_rotations
 
@@ -308,12 +313,49 @@ def test_planar_posed_edges_equal_the_per_face_kernel_bit_for_bit(n_bodies):
     shapes = rng.normal(size=(n_bodies, model.n_shape)) * np.sqrt(model.eigenvalues)
     poses = model.clip_pose(rng.normal(size=(n_bodies, POSE_SIZE)) * 0.5)
     G, rv = chain_rotations(poses, model.hinge_axes)
-    rv, G = rv.astype(np.float32), G.astype(np.float32)
+    rv, G = model._joint_features(G, rv), G.astype(np.float32)
+    x = posed.slot_regressors(rv, model._slots)
     for D in (model._shape_gradients(shapes), model._shape_gradients(shapes[:1])):
         want = posed.posed_edges(rv, model._Qc, model.joint_pairs, D, G, model.face_parts)
-        got = posed.posed_edges_planar(rv, posed.planar_q(model._Qc), model.joint_pairs, D, G, model._part_start)
+        got = posed.posed_edges_planar(x, posed.planar_q(model._Qc), model._slot, D, G, model._part_start)
         assert np.abs(want).max() > 0.01
         np.testing.assert_array_equal(got, want)
+
+
+def test_pose_deformation_of_either_width_loads_and_another_is_rejected():
+    """Q_coef on rotation vectors (F, 7, 9) or on rotation entries minus I (F, 19, 9, the shipped
+    model's); any other width is refused by name. A constant-only map of either width is the
+    rigid model."""
+    from studio.body.model import BodyModelError
+
+    pose = cube_model().default_pose()
+    pose[6:9] = [0.4, 0.1, 0.0]
+    rigid = cube_model().vertices(np.array([0.2]), pose)
+    for width in (7, 19):
+        Q = np.zeros((12, width, 9))
+        Q[:, -1] = np.eye(3).ravel()
+        np.testing.assert_allclose(cube_model(Q_coef=Q).vertices(np.array([0.2]), pose), rigid, atol=1e-9)
+    with pytest.raises(BodyModelError, match="Q_coef must be"):
+        cube_model(Q_coef=np.zeros((12, 11, 9)))
+    assert BodyModel.load("female").Q_coef.shape[1:] == (19, 9)
+
+
+def test_wide_training_poses_reach_what_a_lab_records():
+    """The build's wide poses stay inside the joint limits, cap ball joints at 2.6 rad, and reach
+    a seated hip (flexion beyond 1.2 rad) and arms overhead (abduction beyond 1.5 rad), which the
+    near-rest poses never do."""
+    from studio.body.build import sample_poses, sample_wide_poses
+
+    lim = BodyModel.load("female").pose_limits
+    wide = sample_wide_poses(400, lim, np.random.default_rng(0))
+    near = sample_poses(400, lim, np.random.default_rng(0))
+    assert np.all(wide >= lim[:, 0]) and np.all(wide <= lim[:, 1]) and np.all(wide[:, :6] == 0)
+    from studio.body.skeleton import pose_slices
+
+    hip, shoulder = (pose_slices()[PART_NAMES.index(n)] for n in ("upperleg_l", "upperarm_l"))
+    assert np.linalg.norm(wide[:, hip], axis=1).max() <= 2.6 + 1e-12
+    assert np.mean(wide[:, hip.start] < -1.2) > 0.15 and np.all(near[:, hip.start] > -1.2)
+    assert np.mean(wide[:, shoulder.start + 1] < -1.5) > 0.1 and np.all(near[:, shoulder.start + 1] > -1.5)
 
 
 def test_face_parts_out_of_range_are_rejected():
@@ -322,3 +364,37 @@ def test_face_parts_out_of_range_are_rejected():
         cube_model(face_parts=np.full(12, 15))
     with pytest.raises(BodyModelError, match=r"face_parts must lie in 0\.\.14"):
         cube_model(face_parts=np.full(12, -1))
+
+
+def test_the_reduced_pose_deformation_keeps_the_full_one_within_a_few_per_cent():
+    """The kernel's map reduced to Q_RANK regressors per joint pair (posed.low_rank_q): at
+    poses across every joint's range the posed edges' deformation (what Q adds to the rigid
+    model's edges) differs from the full map's by 8 % of itself at rank 8 (measured 7.5 %), 0
+    when the rank keeps all 18; at the rest pose (features ~0) the edges are the full map's."""
+    from studio.body import posed, skeleton
+    from studio.body.model import Q_RANK
+
+    model = BodyModel.load("female")
+    assert model._Q_reduce is not None and model._Qp.shape[0] == Q_RANK + 1
+    rng = np.random.default_rng(3)
+    P = np.concatenate([skeleton.sample_poses(40, model.pose_limits, rng),
+                        skeleton.sample_wide_poses(40, model.pose_limits, rng)])
+    S = rng.normal(size=(len(P), model.n_shape)) * np.sqrt(model.eigenvalues)
+    G = model.part_rotations(P)
+    feats, D, Gf = model._joint_features(G), model._shape_gradients(S), G.astype(np.float32)
+    full = posed.posed_edges_planar(posed.slot_regressors(feats, model._slots), posed.planar_q(model._Qc),
+                                    model._slot, D, Gf, model._part_start)
+    rigid = model._posed_edges(S, P, use_q=False, reference=True)
+    reduced = model._posed_edges(S, P, reference=True)
+    err = np.linalg.norm(reduced - full) / np.linalg.norm(full - rigid)
+    assert 0.03 < err < 0.08
+    sample = skeleton.joint_features(model.part_rotations(skeleton.sample_wide_poses(100, model.pose_limits, rng)))
+    Cp, A = posed.low_rank_q(model._Qc, model._slots, model._slot, sample, 18)
+    every = posed.posed_edges_planar(posed.slot_regressors(feats, model._slots, A), Cp, model._slot, D, Gf,
+                                     model._part_start)
+    np.testing.assert_allclose(every, full, rtol=0, atol=2e-5 * np.abs(full).max())
+    rest = model.default_pose()[None]  # features ~0: only the exact constant row is left
+    G0 = model.part_rotations(rest)
+    at_rest = posed.posed_edges_planar(posed.slot_regressors(model._joint_features(G0), model._slots),
+                                       posed.planar_q(model._Qc), model._slot, D[:1], G0.astype(np.float32), model._part_start)
+    np.testing.assert_allclose(model._posed_edges(S[:1], rest, reference=True), at_rest, rtol=0, atol=1e-7)

@@ -134,3 +134,43 @@ def test_joint_angles_near_pi_come_back_with_their_axis(angle):
     got = rv[..., 3, :]
     assert abs(np.linalg.norm(got) - angle) < 1e-9
     assert abs(abs(got @ axis) / np.linalg.norm(got) - 1.0) < 1e-9
+
+
+def test_joint_features_are_the_relative_rotations_minus_identity():
+    """eq. 3.16's regressors of the shipped model: zero at rest, R_rel − I otherwise (a hinge of
+    θ about x: sin θ and 1 − cos θ in their places), even in the angle where rotation vectors
+    are odd (a flexion's bulge is the same either side of rest only through these)."""
+    axes = np.zeros((15, 3))
+    axes[:, 0] = 1.0
+    sl = skeleton.pose_slices()
+    pose = np.zeros(skeleton.POSE_SIZE)
+    assert np.abs(skeleton.joint_features(skeleton.part_rotations(pose, axes)[0])).max() == 0.0
+    pose[sl[1]] = [0.3, 0.0, 0.0]  # torso
+    pose[sl[2]] = [0.2]  # head hinge about x
+    G = skeleton.part_rotations(pose, axes)[0]
+    f = skeleton.joint_features(G)
+    assert f.shape == (15, 9) and np.all(f[0] == 0.0)
+    np.testing.assert_allclose(f[1].reshape(3, 3), rotvec_to_matrix(np.array([0.3, 0, 0])) - np.eye(3), atol=1e-12)
+    np.testing.assert_allclose(f[2].reshape(3, 3)[1:, 1:], [[np.cos(0.2) - 1, -np.sin(0.2)],
+                                                           [np.sin(0.2), np.cos(0.2) - 1]], atol=1e-12)
+    pose[sl[2]] = [-0.2]
+    g = skeleton.joint_features(skeleton.part_rotations(pose, axes)[0])
+    assert g[2, 4] == pytest.approx(f[2, 4]) and g[2, 7] == pytest.approx(-f[2, 7])
+    # a batch gives each body's own features
+    np.testing.assert_array_equal(skeleton.joint_features(np.stack([G, G]))[1], f)
+
+
+def test_pose_deformation_regression_recovers_any_feature_count():
+    """eq. 3.17 on K = 9 features per joint: coefficients (F, 19, 9) recovered exactly from
+    noiseless examples, Q = I at rest."""
+    rng = np.random.default_rng(3)
+    F, J, N = 5, 4, 80
+    pairs = np.array([[0, 1], [1, 2], [2, 3], [3, 0], [1, 3]])
+    coef = rng.normal(size=(F, 19, 9)) * 0.1
+    coef[:, 18] = np.eye(3).ravel()
+    feats = rng.normal(size=(N, J, 9))
+    Q = scape.pose_deformation(coef, feats, pairs)
+    fit = scape.fit_pose_deformation(Q, feats, pairs, ridge=0.0)
+    assert fit.shape == (F, 19, 9)
+    np.testing.assert_allclose(fit, coef, atol=1e-9)
+    np.testing.assert_allclose(scape.pose_deformation(fit, np.zeros((1, J, 9)), pairs)[0], np.broadcast_to(np.eye(3), (F, 3, 3)))

@@ -20,6 +20,8 @@ def register(subparsers) -> None:
     b.add_argument("--train", type=int, default=500, help="training bodies per population")
     b.add_argument("--test", type=int, default=100, help="held-out bodies per population")
     b.add_argument("--poses", type=int, default=100, help="poses of the reference body (>= 80)")
+    b.add_argument("--wide-poses", type=int, default=100,
+                   help="poses across each joint's whole range (seated, arms overhead; >= 0)")
     b.add_argument("--scratch", type=Path, default=None, help="folder for held-out sets (benchmark)")
     b.set_defaults(func=run_build)
     i = sub.add_parser("info", help="summarise the shipped models")
@@ -33,6 +35,8 @@ def run_build(args: argparse.Namespace) -> int:
 
     if args.poses < 80:
         raise CommandError(f"--poses must be at least 80 (70 training poses + held-out), got {args.poses}")
+    if args.wide_poses < 0:
+        raise CommandError(f"--wide-poses must be 0 or more, got {args.wide_poses}")
     if args.train < 40:
         raise CommandError(f"--train must be at least 40 bodies, got {args.train}")
     try:
@@ -59,7 +63,7 @@ def run_build(args: argparse.Namespace) -> int:
             prog.update(task, description=msg)
 
         summary = build_models(
-            out, seed=args.seed, n_train=args.train, n_test=args.test, n_poses=args.poses,
+            out, seed=args.seed, n_train=args.train, n_test=args.test, n_poses=args.poses, n_wide_poses=args.wide_poses,
             scratch=args.scratch, progress=say,
         )
     console.print(f"wrote {out / 'scape_models.npz'} ({summary['file_bytes'] / 1e6:.1f} MB)")

@@ -120,39 +120,8 @@ def pose_error(results: dict) -> None:
 def lab_postures(results: dict) -> None:
     """The pose library's families (what a lab records: seated, arms overhead, half squat, ...) on
     4 + 4 held-out adults at the true pose, model vs Anny's posing of the same person (shape
-    fitted at rest, no alignment): with the regressed Q and rigid (Q = I)."""
-    try:
-        from studio.body.anny_adapter import anny_truth_meshes
-    except ImportError:
-        return
-    from studio.fit.library import pose_library
-
-    errs: dict[str, dict[str, list]] = {"with_Q": {}, "rigid_Q=I": {}}
-    for g in ("male", "female"):
-        m = BodyModel.load(g)
-        phen = np.load(SCRATCH / f"heldout_{g}.npz")["phenotypes"][:4]
-        P, names = pose_library(m, variants=2)
-        P, names = P[::2], names[::2]  # without the mirror twins
-        beta = m.shape_from_vertices(anny_truth_meshes(phen, np.zeros((len(phen), P.shape[1])))["vertices"])
-        for i in range(len(phen)):
-            truth = anny_truth_meshes(np.repeat(phen[i : i + 1], len(P), 0), P)["vertices"]
-            for name, use_q in (("with_Q", True), ("rigid_Q=I", False)):
-                V = m.vertices_batch(np.repeat(beta[i : i + 1], len(P), 0), P, use_q=use_q)
-                for fam, e in zip(names, np.linalg.norm(V - truth, axis=-1).mean(axis=1)):
-                    errs[name].setdefault(fam, []).append(float(e * 1000))
-    out = {k: {fam: float(np.mean(v)) for fam, v in d.items()} for k, d in errs.items()}
-    for k in out:
-        out[k]["mean"] = float(np.mean(list(out[k].values())))
-    results["lab_postures_mm"] = out
-    print("\nLab postures: mean vertex error (mm) vs Anny at the true pose, 8 held-out adults")
-    for fam in out["with_Q"]:
-        print(f"  {fam:16s} {out['with_Q'][fam]:6.2f}   (rigid {out['rigid_Q=I'][fam]:6.2f})")
-
-
-def lab_postures(results: dict) -> None:
-    """The pose library's families (what a lab records: seated, arms overhead, half squat, ...) on
-    4 + 4 held-out adults at the true pose, model vs Anny's posing of the same person (shape
-    fitted at rest, no alignment): with the regressed Q and rigid (Q = I)."""
+    fitted at rest, no alignment): with the regressed Q, the search body's
+    (:meth:`studio.body.BodyModel.search_model`) and rigid (Q = I)."""
     if "--no-anny" in sys.argv:
         return
     try:
@@ -161,7 +130,7 @@ def lab_postures(results: dict) -> None:
         return
     from studio.fit.library import pose_library
 
-    errs: dict[str, dict[str, list]] = {"with_Q": {}, "rigid_Q=I": {}}
+    errs: dict[str, dict[str, list]] = {"with_Q": {}, "search_body": {}, "rigid_Q=I": {}}
     for g in ("male", "female"):
         m = BodyModel.load(g)
         phen = np.load(SCRATCH / f"heldout_{g}.npz")["phenotypes"][:4]
@@ -170,8 +139,8 @@ def lab_postures(results: dict) -> None:
         beta = m.shape_from_vertices(anny_truth_meshes(phen, np.zeros((len(phen), P.shape[1])))["vertices"])
         for i in range(len(phen)):
             truth = anny_truth_meshes(np.repeat(phen[i : i + 1], len(P), 0), P)["vertices"]
-            for name, use_q in (("with_Q", True), ("rigid_Q=I", False)):
-                V = m.vertices_batch(np.repeat(beta[i : i + 1], len(P), 0), P, use_q=use_q)
+            for name, body, use_q in (("with_Q", m, True), ("search_body", m.search_model(), True), ("rigid_Q=I", m, False)):
+                V = body.vertices_batch(np.repeat(beta[i : i + 1], len(P), 0), P, use_q=use_q)
                 for fam, e in zip(names, np.linalg.norm(V - truth, axis=-1).mean(axis=1)):
                     errs[name].setdefault(fam, []).append(float(e * 1000))
     out = {k: {fam: float(np.mean(v)) for fam, v in d.items()} for k, d in errs.items()}
@@ -180,7 +149,8 @@ def lab_postures(results: dict) -> None:
     results["lab_postures_mm"] = out
     print("\nLab postures: mean vertex error (mm) vs Anny at the true pose, 8 held-out adults")
     for fam in out["with_Q"]:
-        print(f"  {fam:16s} {out['with_Q'][fam]:6.2f}   (rigid {out['rigid_Q=I'][fam]:6.2f})")
+        print(f"  {fam:16s} {out['with_Q'][fam]:6.2f}   (search body {out['search_body'][fam]:6.2f}, "
+              f"rigid {out['rigid_Q=I'][fam]:6.2f})")
 
 
 def posed_truth(results: dict) -> None:

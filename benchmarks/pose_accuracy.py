@@ -52,7 +52,11 @@ batches run on threads and whose fits equal ``cost-retry``'s to the last digit, 
 threads (``--workers 1 --threads 2``). ``outline`` / ``dev-outline``: ``FitOptions.polish_outline`` on (the
 polish's vertices read their distance beyond the observed outline; run by code where it was the default, digests
 ``ee6592ea…`` / ``4d09e367…``, the same arithmetic; left off); ``dev-outline-clipped``: the distance map less ½
-clipped at the pixel centres (code not kept). ``--families`` fits only the frames
+clipped at the pixel centres (code not kept). ``hybrid`` / ``dev-hybrid``: the search on the model's search body
+(:meth:`studio.body.BodyModel.search_model`, the previous pose deformation), the polish and last stage on the new
+model (digests ``7176b40d…`` / ``00161fec…``: the code before the library cache's key named the model, the same fits,
+checked); ``dev-search-body``: the same with a retry's shortlist cut after leaving out the avoided families (not
+kept). ``--families`` fits only the frames
 of the named posture families (e.g. ``--families seated`` for ``no-support``).
 
 Splits (``--split``): ``held-out`` (the default, seeds from 1000, only ever measured: the figures
@@ -128,7 +132,13 @@ VARIANTS = {"full": {}, "no-library": {"start": "stride"}, "no-rival": {"rival_h
             # issue 13: the polish's vertices read their distance beyond the outline of the observed pixels'
             # region, half a pixel past their centres (outline: FitOptions.polish_outline, a signed map, −½ on
             # the observed pixels; clipped: the distance map less ½ at the pixel centres, code not kept)
-            "dev-outline-clipped": {}, "dev-outline": {"polish_outline": True}, "outline": {"polish_outline": True}}
+            "dev-outline-clipped": {}, "dev-outline": {"polish_outline": True}, "outline": {"polish_outline": True},
+            # issue 13: the search scores the shipped pose deformation (rotation vectors, near rest), the polish and
+            # the final stage the model's own, on rotation entries learned also from wide poses (BodyModel.search_model)
+            "dev-hybrid": {}, "hybrid": {},
+            # ... and a retry's library shortlist cut after leaving out the families its last attempts started
+            # from (not kept: dev 4 frames farther, none closer; a run 6.5 -> 14.2 mm)
+            "dev-search-body": {}, "search-body": {}}
 STANDING = ("a_pose", "t_pose", "arms_overhead", "hands_on_hips", "arm_forward", "arms_crossed", "wide_stance",
             "torso_twist")
 

@@ -297,7 +297,13 @@ def build_models(
         feats_all.append(skeleton.joint_features(Rp))
         if b == 0:
             Yp_ref = Yp
-    coef = scape.fit_pose_deformation(np.concatenate(Q_all).astype(np.float64), np.concatenate(feats_all), pairs)
+    Q_all = np.concatenate(Q_all).astype(np.float64)
+    coef = scape.fit_pose_deformation(Q_all, np.concatenate(feats_all), pairs)
+    # the fit's search body (BodyModel.search_model): eq. 3.16 on the rotation vectors, learned
+    # from the near-rest poses alone (the previous releases' model, bit for bit)
+    near = (np.arange(len(bodies))[:, None] * len(fit) + np.arange(n_fit)).ravel()  # each body's first n_fit
+    rotvecs = np.tile(skeleton.joint_rotvecs(G[:n_fit]), (len(bodies), 1, 1))
+    coef_search = scape.fit_pose_deformation(Q_all[near], rotvecs, pairs)
     del Q_all
     Yp = Yp_ref
     if scratch is not None:
@@ -324,6 +330,7 @@ def build_models(
         joint_regressor=Wj.astype(np.float32),
         joint_pairs=pairs.astype(np.int8),
         Q_coef=coef.astype(np.float32),
+        Q_coef_search=coef_search.astype(np.float32),
         anny_map_indices=M.indices.astype(np.int32),
         anny_map_weights=M.data.astype(np.float32),
         anny_map_indptr=M.indptr.astype(np.int32),

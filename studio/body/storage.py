@@ -49,13 +49,13 @@ def dequantize_blocks(q: np.ndarray, scale: np.ndarray, block: int = BLOCK) -> n
 
 
 def save_model_file(path: Path, arrays: dict[str, np.ndarray]) -> None:
-    """Write the model archive atomically: float ``*/D_basis`` quantised, ``Q_coef`` as
-    float16, LZMA-compressed members with a fixed timestamp (same arrays → same bytes)."""
+    """Write the model archive atomically: float ``*/D_basis`` quantised, ``Q_coef`` and
+    ``Q_coef_search`` as float16, LZMA-compressed members with a fixed timestamp (same arrays → same bytes)."""
     out = {}
     for name, a in arrays.items():
         if name.endswith("/D_basis") and np.issubdtype(np.asarray(a).dtype, np.floating):
             out[name + "_q"], out[name + "_scale"] = quantize_blocks(a)
-        elif name == "Q_coef":
+        elif name in ("Q_coef", "Q_coef_search"):
             out[name] = np.asarray(a).astype(np.float16)
         else:
             out[name] = np.asarray(a)

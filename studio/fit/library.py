@@ -335,7 +335,7 @@ def library_match(model, cameras, masks, xy, *, shape=None, scales=SCALES, n_hea
     if library is not None:
         poses, names, pts, pelvis, stature = _library_bodies(model, shape, library, n_points)
     else:
-        key = (model.gender, shape.tobytes(), n_points)
+        key = (id(model), model.gender, shape.tobytes(), n_points)  # a model and its search body differ
         if key not in _BODIES:
             if len(_BODIES) > 4:
                 _BODIES.clear()

@@ -102,8 +102,9 @@ class FitOptions:
     observed pixels, half a pixel past their centres (:func:`studio.fit.polish.outline_distance`),
     instead of the distance map itself, where a vertex on that outline counts ½ px; off by default.
     On a body our model can represent exactly (the polish tests' scene) the stand-in at the true
-    body falls 0.136 → 0.013 and the polish from 2–3 cm / 0.15 rad off ends at cost 0.10 instead
-    of 0.19, joints 7 mm instead of 11 mm off. On the benchmark's Anny people it lowered the fit's
+    body falls 0.132 → 0.014 and the polish from 2–3 cm / 0.15 rad off ends at cost 0.13 instead
+    of 0.21, joints 10 mm instead of 12 mm off (the previous model: 0.10 / 0.19, 7 / 11 mm). On the
+    benchmark's Anny people (the previous model) it lowered the fit's
     own cost (dev: 49 of 64 frames, median −3.4 %) and balanced precision and recall (held out P/R
     0.972 / 0.966 → 0.970 / 0.970; dev 0.974 / 0.967 → 0.972 / 0.971) without bringing the
     bodies closer (dev mean surface 6.24 → 6.29 mm, 4 frames closer and 8 farther by more than

@@ -398,3 +398,24 @@ def test_the_reduced_pose_deformation_keeps_the_full_one_within_a_few_per_cent()
     at_rest = posed.posed_edges_planar(posed.slot_regressors(model._joint_features(G0), model._slots),
                                        posed.planar_q(model._Qc), model._slot, D[:1], G0.astype(np.float32), model._part_start)
     np.testing.assert_allclose(model._posed_edges(S[:1], rest, reference=True), at_rest, rtol=0, atol=1e-7)
+
+
+def test_the_search_body_is_the_model_with_its_near_rest_pose_deformation():
+    """BodyModel.search_model: the model with ``Q_search`` (eq. 3.16 on rotation vectors, (F, 7,
+    9)), made once; the same rest body (both regressions keep Q = I there), a different seated
+    one (the deformations differ most in deep postures); a model without ``Q_search`` searches
+    with itself."""
+    from studio.fit.library import family_pose
+
+    model = BodyModel.load("female")
+    search = model.search_model()
+    assert search is model.search_model() and search.search_model() is search
+    assert search.Q_coef.shape[1:] == (7, 9) and search.Q_search is None and search.gender == "female"
+    shape = 0.7 * np.sqrt(model.eigenvalues)
+    rest = model.default_pose()
+    np.testing.assert_allclose(search.vertices(shape, rest), model.vertices(shape, rest), atol=1e-6)
+    seated = family_pose(model, "seated")
+    gap = np.linalg.norm(search.vertices(shape, seated) - model.vertices(shape, seated), axis=1)
+    assert gap.max() > 0.03, gap.max()  # 61 mm
+    lone = cube_model()
+    assert lone.search_model() is lone

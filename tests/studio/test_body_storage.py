@@ -37,6 +37,6 @@ def test_shipped_model_is_stored_compactly():
 
     with np.load(DATA_FILE) as z:
         assert z["female/D_basis_q"].dtype == np.int8
-    assert DATA_FILE.stat().st_size < 10e6
+    assert DATA_FILE.stat().st_size < 11e6  # 10.3 MB: both pose deformations (the search body's)
     model = BodyModel.load("female")
     assert model.D_basis.shape == (30, 9 * len(model.faces))

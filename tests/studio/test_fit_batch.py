@@ -16,11 +16,12 @@ from studio.render import silhouette
 
 from test_fit_frame import ring_cameras
 
-#: the single-frame fits are the batch's starts; without the least-squares polish (issue 13): with it
-#: A1's tiny-budget fit (the wrong heading, ~320 mm off with or without it) ends at a lower cost
-#: (5.26 → 3.48) where the batch's shared shape moves its pose 33 mm (A0: 29 → 20 mm off the truth)
+#: the single-frame fits are the batch's starts, with a short least-squares polish (issue 13): the fit
+#: searches on the model's search body and the polish refines the answer on the model itself
+#: (BodyModel.search_model); with no polish a tiny budget left A0's single fit at 1.33× the cost of
+#: the batch's shared shape, and the batch of two people went unflagged
 TINY = FitOptions(levels=(2, 2, 1), n_particles=24, n_layers=3, nm_evaluations=25, final_evaluations=30,
-                  n_shape_free=3, limb_particles=0, partition_particles=0, rival_heading=False, polish_iterations=0)
+                  n_shape_free=3, limb_particles=0, partition_particles=0, rival_heading=False, polish_iterations=5)
 BATCH = BatchOptions(clothing="tight", levels=(2, 1), rounds=1, pose_evaluations=40, shape_evaluations=60,
                      final_evaluations=30, n_shape_free=3, gender_shape_free=3)
 

@@ -62,7 +62,7 @@ def test_contour_and_spans_equal_reference_on_body(body, level):
         fast = silhouettes_fast(cams, V, model.faces)
         cont = silhouettes_contour(cams, V, model.faces)
         for r, a, b in zip(ref, fast, cont, strict=True):
-            assert r.sum() > 400 >> (2 * level)
+            assert r.sum() > 300 >> (2 * level)  # the body is in view (25 px at level 2)
             assert np.count_nonzero(r != a) == 0
             # the winding fill differs only for pixel centres exactly on the contour
             assert np.count_nonzero(r != b) <= 2

@@ -138,7 +138,9 @@ VARIANTS = {"full": {}, "no-library": {"start": "stride"}, "no-rival": {"rival_h
             "dev-hybrid": {}, "hybrid": {},
             # ... and a retry's library shortlist cut after leaving out the families its last attempts started
             # from (not kept: dev 4 frames farther, none closer; a run 6.5 -> 14.2 mm)
-            "dev-search-body": {}, "search-body": {}}
+            "dev-search-body": {}, "search-body": {},
+            # issue 13: polish_outline again, with the search body and the model
+            "dev-hybrid-outline": {"polish_outline": True}, "hybrid-outline": {"polish_outline": True}}
 STANDING = ("a_pose", "t_pose", "arms_overhead", "hands_on_hips", "arm_forward", "arms_crossed", "wide_stance",
             "torso_twist")
 

@@ -335,12 +335,14 @@ def library_match(model, cameras, masks, xy, *, shape=None, scales=SCALES, n_hea
     if library is not None:
         poses, names, pts, pelvis, stature = _library_bodies(model, shape, library, n_points)
     else:
-        key = (id(model), model.gender, shape.tobytes(), n_points)  # a model and its search body differ
+        # by the model object (a model and its search body share a gender), held in the entry so
+        # that its id cannot be reused while cached
+        key = (id(model), shape.tobytes(), n_points)
         if key not in _BODIES:
             if len(_BODIES) > 4:
                 _BODIES.clear()
-            _BODIES[key] = _library_bodies(model, shape, pose_library(model), n_points)
-        poses, names, pts, pelvis, stature = _BODIES[key]
+            _BODIES[key] = (model, _library_bodies(model, shape, pose_library(model), n_points))
+        poses, names, pts, pelvis, stature = _BODIES[key][1]
     scales = np.asarray(scales, dtype=np.float64)
     pts = (pts[:, None] * scales[None, :, None, None]).reshape(-1, n_points, 3)  # (P*S, M, 3)
     yaws = np.linspace(-np.pi, np.pi, n_headings, endpoint=False)

@@ -20,8 +20,8 @@ silhouettes, as variants:
 
 Joint error: eq. 4.17, the mean over the 15 joints of our joint regressor applied to the fitted
 mesh and to the true body mapped into our topology (as ``benchmarks/fit_accuracy.py``). Each
-fitted frame is cached as JSON under ``benchmarks/results/monocular/`` (a rerun fits only what is
-missing); the summary goes to ``benchmarks/results/monocular.json``.
+fitted frame is cached as JSON under ``benchmarks/results/monocular/<labels>/<fitting code digest>/``
+(a rerun fits only what is missing); the summary goes to ``benchmarks/results/monocular.json``.
 
     .venv/bin/python benchmarks/monocular.py [--frames 0:24:4] [--workers 2] [--sequence] [--estimated] [--quick]
 """
@@ -161,8 +161,10 @@ def main(argv=None) -> int:
     truth = load_truth(ws.layout)
     true_lights = json.loads((ws.layout.truth_dir / "lights.json").read_text())["lights"]
     options = FitOptions(**QUICK) if args.quick else FitOptions()
+    from studio.fit.units import frame_fit_code_digest
+
     tag = f"{args.labels}{'_quick' if args.quick else ''}"
-    folder = args.out / tag
+    folder = args.out / tag / frame_fit_code_digest()  # fits of other fitting code (or model) are not reused
     folder.mkdir(parents=True, exist_ok=True)
 
     def path(variant, f):

@@ -9,6 +9,7 @@ from rigs.session import SessionWriter
 from studio.body import BodyModel
 from studio.cli import main
 from studio.render import silhouette
+from studio.simulate.samples import SAMPLES
 
 
 def _tiny_session(path):
@@ -41,20 +42,23 @@ def test_demo_runs_the_pipeline_and_says_what_is_missing(tmp_path, monkeypatch, 
     session = tmp_path / "walk"
     _tiny_session(session)
     calls = {}
-    monkeypatch.setattr(studio.simulate, "ensure_rendered", lambda spec, seed=0, progress=None: session)
+    monkeypatch.setattr(studio.simulate, "ensure_rendered",
+                        lambda spec, seed=0, progress=None: calls.setdefault("spec", spec) and session)
     monkeypatch.setattr(studio.segment, "segment_session",
                         lambda path, frames=None, workers=1, progress=None, force=False: calls.setdefault("segment", frames))
     monkeypatch.setattr(fit_cmd, "QUICK", dict(n_particles=12, n_layers=2, nm_evaluations=4, final_evaluations=4,
                                                partition_particles=8, partition_layers=1, n_shape_free=2))
     spec = tmp_path / "spec.yaml"
     spec.write_text("name: walk\n")
-    assert main(["demo", "--spec", str(spec), "--frames", "0", "--workers", "1", "--quick"]) == 0
+    # a sample's folder stands for its spec.yaml (as the README and the demo's own hint write it)
+    assert main(["demo", "--spec", str(tmp_path), "--frames", "0", "--workers", "1", "--quick"]) == 0
     out = capsys.readouterr().out
-    assert calls["segment"] == [0]
-    assert "Not done yet" in out and "light: not estimated (no visible shadow" in out
+    assert calls["spec"] == spec and calls["segment"] == [0]
+    assert "Not run by this demo" in out and "light: not estimated (no visible shadow" in out
+    assert "--spec studio/samples/clothing_11 " in out and (SAMPLES / "clothing_11" / "spec.yaml").is_file()
     assert f"report: {(session / 'report' / 'index.html').resolve()}" in out
     html = (session / "report" / "index.html").read_text()
-    assert "Not done yet" not in html and "does not do" not in html  # the report is for a study, not about the demo
+    assert "Not run by this demo" not in html and "does not do" not in html  # the report is for a study, not about the demo
     assert str(tmp_path) not in html  # no machine path in the page
     assert (session / "report" / "report.pdf").read_bytes().startswith(b"%PDF")
 
@@ -62,3 +66,5 @@ def test_demo_runs_the_pipeline_and_says_what_is_missing(tmp_path, monkeypatch, 
 def test_demo_rejects_a_missing_spec(tmp_path, capsys):
     assert main(["demo", "--spec", str(tmp_path / "nope.yaml")]) == 1
     assert "spec not found" in capsys.readouterr().err
+    assert main(["demo", "--spec", str(tmp_path)]) == 1  # a folder without a spec.yaml
+    assert f"{tmp_path}: sample sequence spec not found" in capsys.readouterr().err

@@ -1,7 +1,7 @@
 """``studio demo``: the main job on the default sample sequence, no camera needed.
 
 simulate (once, cached) → segment → fit → light → report, with progress, then prints where the
-report is and (on the terminal, not in the report) what the demo does not do yet.
+report is and (on the terminal, not in the report) what the demo leaves out.
 """
 
 from __future__ import annotations
@@ -14,11 +14,10 @@ from studio.simulate.samples import SAMPLES
 DEFAULT_SPEC = SAMPLES / "walk" / "spec.yaml"
 
 NOT_DONE = (
-    "Not done yet by the demo (later issues):\n"
-    "  - the fit with the shadow term (studio fit --shadows, thesis eq. 5.7): the demo estimates the light only\n"
-    "  - the shape under clothing (thesis ch. 6) only with --batch: studio demo --batch --spec "
-    "studio/samples/clothing_poses --frames 0:6\n"
-    "  - the demo fits a subset of the walk frames (--frames) to finish in a few minutes on 2 cores"
+    "Not run by this demo (available):\n"
+    "  - the fit with the shadow term (studio fit SESSION --shadows, thesis eq. 5.7): the demo estimates the light only\n"
+    "  - the shape under clothing (thesis ch. 6): studio demo --batch --spec studio/samples/clothing_11 --frames 0:11\n"
+    "  - every walk frame: the demo fits a subset (--frames) to finish in a few minutes on 2 cores"
 )
 
 
@@ -33,7 +32,7 @@ def register(subparsers) -> None:
             "measurement report; prints where the report is."
         ),
     )
-    p.add_argument("--spec", type=Path, default=DEFAULT_SPEC, help="sample sequence spec (default: walk)")
+    p.add_argument("--spec", type=Path, default=DEFAULT_SPEC, help="sample sequence spec, or a sample's folder (default: walk)")
     p.add_argument("--frames", default="0:24:6",
                    help="frames to fit, START:STOP[:STEP] or a comma list (default: %(default)s, 4 frames)")  # fmt: skip
     p.add_argument("--workers", type=int, default=2, help="worker processes (default: %(default)s)")
@@ -57,8 +56,10 @@ def run(args) -> int:
     from studio.simulate import ensure_rendered
     from studio.workspace.frames import select_frames
 
-    if not args.spec.is_file():
-        raise CommandError(f"{args.spec}: sample sequence spec not found")
+    spec = args.spec / "spec.yaml" if args.spec.is_dir() else args.spec  # a sample's folder names its spec
+    if not spec.is_file():
+        raise CommandError(f"{args.spec}: sample sequence spec not found (a spec.yaml or a folder holding one)")
+    args.spec = spec
     if args.workers < 1:
         raise CommandError(f"--workers must be >= 1, got {args.workers}")
     t0 = time.perf_counter()

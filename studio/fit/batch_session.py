@@ -11,7 +11,8 @@
 4. **Batch** (:func:`studio.fit.batch.batch_fit`): gender by batch unless given. ``clothing``
    ``tight`` / ``loose`` set the cost; ``auto`` fits ``loose`` and calls the clothing tight when
    the batch body explains nearly all of the clothing pixels (recall ≥ :data:`TIGHT_RECALL`), then
-   refits with the tight cost.
+   refits with the tight cost — and keeps the loose batch when that refit's body is implausible
+   where the loose one is not (:func:`implausible_tight`: the clothes were not tight).
 5. ``fit/batch.json`` (format ``studio.fit-batch`` v1) and ``fit/batch_neutral.ply`` (the batch
    body in the model's default pose), written atomically.
 """
@@ -29,8 +30,8 @@ from studio.fit.batch_frames import choose_frames
 from studio.fit.errors import FitError
 from studio.fit.frame import FitOptions
 
-__all__ = ["TIGHT_RECALL", "clothing_from_coverage", "fit_batch_session", "load_batch", "run_batch_command",
-           "session_skin"]
+__all__ = ["TIGHT_RECALL", "clothing_from_coverage", "fit_batch_session", "implausible_tight", "load_batch",
+           "run_batch_command", "session_skin"]
 
 log = logging.getLogger(__name__)
 
@@ -90,6 +91,21 @@ def clothing_from_coverage(coverage: float, threshold: float = TIGHT_RECALL) -> 
     return "tight" if coverage >= threshold else "loose"
 
 
+def implausible_tight(loose: dict, tight: dict, gender: str) -> list[str]:
+    """Why a ``clothing="auto"`` call of *tight* is refused: the measurements (metres, kg; names of
+    :func:`studio.body.measure`) of the tight refit's body that lie beyond the quality gates'
+    population bound (|z| above the first of :data:`studio.fit.quality.POPULATION_Z` against ANSUR II) where the
+    loose batch body's do not. A garment called tight that is not makes the tight cost fill it
+    (the shipped ``clothing_11`` sample, a long shirt over a skirt: coverage 0.83, hip girth
+    +332 mm, +4.0 σ); a person who is that large is as large under the loose cost, and no reason
+    is given. Empty: the tight call stands."""
+    from studio.fit.quality import POPULATION_Z, population_z
+
+    zl, zt = population_z(loose, gender), population_z(tight, gender)
+    return [f"{name.replace('_', ' ')} {z:+.1f} σ from ANSUR II with the tight cost, {zl[name]:+.1f} σ with the loose"
+            for name, z in zt.items() if abs(z) > POPULATION_Z[0] and abs(zl.get(name, 0.0)) <= POPULATION_Z[0]]
+
+
 def _clothing_recall(result, frames: list[BatchFrame]) -> float:
     """Share of the observed clothing pixels (person, not skin) the batch body covers."""
     from studio.body import BodyModel
@@ -127,7 +143,7 @@ def fit_batch_session(
     """Single-frame fits, frame choice, skin, the batch and its files (see the module doc);
     returns the ``fit/batch.json`` object."""
     from rigs.atomic import atomic_write_json
-    from studio.body import BodyModel
+    from studio.body import BodyModel, measure
     from studio.execution import ExecutionError, open_runner
     from studio.fit.quality import screen_masks
     from studio.fit.session import fit_session, load_fits, open_workspace
@@ -180,16 +196,19 @@ def fit_batch_session(
                              for b, p in zip(batch_frames, result.poses, strict=True)]
                     tight = batch_fit(refit, gender=result.gender, options=replace(options, clothing="tight", rounds=1),
                                       runner=runner)
-                    result = replace(tight, gender_costs=result.gender_costs, gender_terms=result.gender_terms,
-                                     margin=result.margin,
-                                     history=result.history + tight.history)
+                    model = BodyModel.load(result.gender)
+                    why = implausible_tight(measure(model, result.shape), measure(model, tight.shape), result.gender)
+                    if why:  # the clothes are not tight: the tight cost filled them
+                        kind, decided["tight_refused"] = "loose", why
+                    else:
+                        result = replace(tight, gender_costs=result.gender_costs, gender_terms=result.gender_terms,
+                                         margin=result.margin, history=result.history + tight.history)
                 decided["chosen"] = kind
             where = runner.where
     except ExecutionError as exc:
         raise FitError(str(exc)) from None
     obj = result.to_json()
     model = BodyModel.load(result.gender)
-    from studio.body import measure
 
     obj.update({
         "clothing": kind,
@@ -252,6 +271,9 @@ def run_batch_command(args, ws, frames, options: FitOptions) -> int:
     print(f"batch of {len(obj['frames'])} frames {obj['frames']}: {obj['gender']}{margin}, clothing {obj['clothing']}, "
           f"stature {obj['measurements']['stature'] * 1000:.0f} mm, cost {obj['total']:.2f} in {obj['wall_time']:.0f} s; "
           f"results in {ws.layout.fit_batch}")
+    refused = (obj.get("clothing_auto") or {}).get("tight_refused")
+    if refused:
+        print("clothing called loose: the tight refit's body was implausible (" + "; ".join(refused) + ")")
     cons = obj["consistency"]
     if cons["flagged"]:
         print("WARNING: the frames may not show one person: " + "; ".join(cons["reasons"]))

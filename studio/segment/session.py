@@ -74,6 +74,7 @@ class SegmentOptions:
     register: bool = True  # move each background model onto the session's frames (a nudged camera)
     largest_component: bool = False  # keep only the largest person component per view
     hull: bool = False  # drop person components the visual hull of all views does not explain
+    bridges: bool = True  # with voting: shadow that splits a person mask, a solid to the other views, is person
     static_frames: int = 0  # > 0: static changes (a box put down) after this many frames: background
     ignore: tuple[str, ...] = ()  # user regions labelled background: "CAM=MASK.png" or a polygons JSON
 
@@ -108,6 +109,9 @@ def _setup_state(state: dict) -> None:
     calib = state.get("calibration")
     _STATE["voter"] = ShadowVoter(calib, state["cameras"]) if calib is not None and state.get("voting", True) else None
     _STATE["hull_cameras"] = {c: calib[c] for c in state["cameras"]} if calib is not None and state.get("hull") else None
+    _STATE["bridge_cameras"] = ({c: calib[c] for c in state["cameras"]}
+                                if calib is not None and state.get("voting", True) and state.get("bridges") else None)
+    _STATE["floor"] = calib.ground if calib is not None else None
     _STATE["changes"] = StaticChanges(state.get("ignore") or {}, int(state.get("static_frames", 0)))
     grid = state.get("grid")
     _STATE["floor_votes"] = (
@@ -131,6 +135,7 @@ def _load_state(spec: dict) -> dict:
     calib = ws.calibration if spec["voting"] or spec["hull"] else None
     _setup_state({"path": spec["path"], "out": spec["out"], "cameras": ws.camera_names, "models": models,
                   "largest_component": bool(options.largest_component), "voting": spec["voting"],
+                  "bridges": bool(options.bridges),
                   "hull": spec["hull"], "static_frames": int(options.static_frames),
                   "ignore": ignore_masks(options.ignore, {c: models[c].shape for c in models}),
                   "calibration": calib, "overlay_every": int(options.overlay_every), "skin": skin,
@@ -170,6 +175,11 @@ def _segment_frame(index: int, state: dict) -> tuple[dict, dict, dict]:
     if voter is not None:
         result = voter.vote(labels, ratios)
         labels, relabelled = result.labels, result.relabelled
+    bridged = {}
+    if state.get("bridge_cameras"):
+        from studio.segment.bridges import shadow_bridges
+
+        labels, bridged = shadow_bridges(labels, state["bridge_cameras"], plane=state["floor"])
     dropped = {}
     if state.get("hull_cameras"):
         from studio.segment.hull import hull_filter
@@ -180,6 +190,8 @@ def _segment_frame(index: int, state: dict) -> tuple[dict, dict, dict]:
         labels[cam], quality[cam] = person_components(labels[cam], state.get("largest_component", False))
         if state.get("hull_cameras"):
             quality[cam]["hull_dropped"] = dropped.get(cam, 0)
+        if state.get("bridge_cameras"):
+            quality[cam]["bridged"] = bridged.get(cam, 0)
         quality[cam].update(changes.get(cam, {}))
     state["last_quality"] = quality
     return frame, labels, relabelled
@@ -341,6 +353,7 @@ def _settings(models: dict, options: SegmentOptions, voting: bool, skin_cameras,
         "registration": registration,
         "largest_component": bool(options.largest_component),
         "hull": bool(options.hull),
+        "bridges": bool(options.bridges) and voting,
         "static_frames": int(options.static_frames),
         "ignore": [str(v) for v in options.ignore],
     }
@@ -410,7 +423,8 @@ def segment_session(
     except WorkspaceError as exc:
         raise SegmentationError(str(exc)) from None
     state = {"path": str(ws.path), "out": str(ws.layout.root), "cameras": cameras, "models": models,
-             "calibration": calib, "voting": voting, "hull": hull, "overlay_every": int(options.overlay_every),
+             "calibration": calib, "voting": voting, "hull": hull, "bridges": bool(options.bridges),
+             "overlay_every": int(options.overlay_every),
              "grid": _floor_grid(calib, options.floor_resolution) if calib is not None else None, "skin": {},
              "largest_component": bool(options.largest_component), "static_frames": int(options.static_frames),
              "ignore": ignore_masks(options.ignore, {c: m.shape for c, m in models.items()})}  # fmt: skip

@@ -251,6 +251,26 @@ def test_auto_clothing_threshold_separates_tight_from_loose_coverage():
         clothing_from_coverage(1.5)
 
 
+def test_auto_clothing_refuses_tight_when_the_tight_cost_makes_the_body_implausible():
+    """``--clothing auto`` on the shipped ``clothing_11`` sample (a woman, long shirt over a skirt)
+    covered 0.83 of the clothing pixels and was called tight; the tight refit's hip girth came out
+    1326 mm (truth 994 mm, +4.0 σ of ANSUR II's women): such a call is refused. A person as large
+    under the loose cost keeps the tight call, and so does a plausible tight body."""
+    from studio.fit.batch_session import implausible_tight
+    from studio.fit.quality import POPULATION_Z, population_z
+
+    loose = {"stature": 1.600, "mass": 62.0, "chest_circumference": 0.950, "waist_circumference": 0.760,
+             "hip_circumference": 1.020}
+    tight = {**loose, "mass": 84.0, "chest_circumference": 1.098, "waist_circumference": 0.903,
+             "hip_circumference": 1.326}
+    assert population_z(tight, "female")["hip_circumference"] > POPULATION_Z[0] > abs(
+        population_z(loose, "female")["hip_circumference"])
+    why = implausible_tight(loose, tight, "female")
+    assert len(why) == 1 and why[0].startswith("hip circumference +4.0 σ from ANSUR II with the tight cost")
+    assert implausible_tight(tight, tight, "female") == []  # as large when loose: a large person, not the clothes
+    assert implausible_tight(loose, loose, "female") == []
+
+
 def test_clothing_residuals_are_the_polish_residuals_under_tight_clothing_and_weight_the_clothes_when_loose(frames):
     """The batch's least-squares stand-in of eq. 6.1–6.4 is, with τ_c = τ and λ_c = 1, exactly
     the single-frame polish's stand-in of eq. 4.5 (residuals and Jacobian); under loose clothing

@@ -29,6 +29,9 @@ def register(subparsers) -> None:
     p.add_argument("--refit-background", action="store_true",
                    help="refit the background (and self-trained skin) models even if saved")  # fmt: skip
     p.add_argument("--no-voting", action="store_true", help="skip multi-view shadow voting")
+    p.add_argument("--no-bridges", action="store_true",
+                   help="keep the shadow that splits a person mask even where the other views see a solid there "
+                        "(default: such shadow — grey trousers in front of the person's own shadow — is person)")
     p.add_argument("--no-skin", action="store_true", help="skip skin detection")
     p.add_argument("--skin-model", type=Path, default=None,
                    help="a trained skin model (.npz) to use for every camera instead of self-training")  # fmt: skip
@@ -81,6 +84,7 @@ def run(args) -> int:
         thresholds=thresholds,
         refit_background=args.refit_background,
         voting=not args.no_voting,
+        bridges=not args.no_bridges,
         skin=not args.no_skin,
         skin_model=args.skin_model,
         overlay_every=max(0, args.overlay_every),

@@ -160,9 +160,9 @@ def bench_uu_pipeline(data: Path, quick: bool) -> dict | None:
     with tempfile.TemporaryDirectory() as tmp:
         session = _calibrated_session(root, Path(tmp), "100:301:100" if quick else "100:401:50")
         ws = Workspace.open(session)
-        from studio.segment.session import _floor_grid
+        from studio.segment.preparation import floor_grid
 
-        votes = FloorVotes(ws.calibration, _floor_grid(ws.calibration, 0.02), ws.camera_names)
+        votes = FloorVotes(ws.calibration, floor_grid(ws.calibration, 0.02), ws.camera_names)
         variants = {"no voting": SegmentOptions(voting=False, skin=False, overlay_every=0),
                     "voting": SegmentOptions(skin=False, overlay_every=0),
                     "voting + hull": SegmentOptions(skin=False, overlay_every=0, hull=True),

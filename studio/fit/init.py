@@ -22,13 +22,14 @@ __all__ = ["STATURE_STEPS", "costs_at_statures", "feet_on_floor", "hull_centroid
 STATURE_STEPS = (-0.06, -0.045, -0.03, -0.015, 0.0, 0.015, 0.03, 0.045, 0.06)
 
 
-def _in_mask(cam, mask: np.ndarray, pts: np.ndarray) -> np.ndarray:
-    """(N,) bool: points in front of ``cam`` projecting inside the image and onto ``mask``.
+def image_pixels(cam, shape: tuple[int, int], pts: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """``(ok, u, v)``: which points (N, 3) ``cam`` sees inside an image of ``shape`` (H, W), in front
+    of it, and their nearest pixel (column, row; valid where ``ok``).
 
     Points whose ideal (undistorted) projection leaves the image are rejected too, so the
     fold-back of the lens model far outside the field of view cannot produce false hits.
     """
-    h, w = mask.shape
+    h, w = shape
     uv, _, front = cam.project_points(pts)
     ideal, _, _ = cam.project_points(pts, distort=False)
     ok = front & np.isfinite(uv).all(axis=1) & np.isfinite(ideal).all(axis=1)
@@ -38,6 +39,12 @@ def _in_mask(cam, mask: np.ndarray, pts: np.ndarray) -> np.ndarray:
     u = np.rint(uv[:, 0]).astype(np.int64)
     v = np.rint(uv[:, 1]).astype(np.int64)
     ok &= (u >= 0) & (u < w) & (v >= 0) & (v < h)
+    return ok, u, v
+
+
+def _in_mask(cam, mask: np.ndarray, pts: np.ndarray) -> np.ndarray:
+    """(N,) bool: points :func:`image_pixels` sees that project onto ``mask``."""
+    ok, u, v = image_pixels(cam, mask.shape, pts)
     hit = np.zeros(len(pts), dtype=bool)
     hit[ok] = mask[v[ok], u[ok]]
     return hit

@@ -27,6 +27,7 @@ from __future__ import annotations
 import cv2
 import numpy as np
 
+from studio.fit.init import image_pixels
 from studio.segment.classify import BACKGROUND, PERSON, SHADOW
 
 __all__ = ["bridge_regions", "person_rays", "shadow_bridges"]
@@ -74,15 +75,14 @@ def person_rays(pixels: np.ndarray, camera, others: list, other_labels: list, *,
         t = (zs[None, :] + offset - (o @ n)[:, None]) / (d @ n)[:, None]
     P = (o[:, None, :] + t[..., None] * d[:, None, :]).reshape(-1, 3)
     valid = np.isfinite(P).all(axis=1) & (t.reshape(-1) > 0)
+    P = np.where(valid[:, None], P, 0.0)
     inside = valid.copy()
     person = np.zeros(len(P), np.int32)
     for cam, lab in zip(others, other_labels, strict=True):
-        uv, _, front = cam.project_points(np.where(valid[:, None], P, 0.0))
-        h, w = lab.shape
-        u, v = np.rint(uv[:, 0]), np.rint(uv[:, 1])
-        seen = valid & front & np.isfinite(uv).all(axis=1) & (u >= 0) & (u < w) & (v >= 0) & (v < h)
+        seen, u, v = image_pixels(cam, lab.shape, P)
+        seen &= valid
         got = np.full(len(P), BACKGROUND, np.uint8)
-        got[seen] = lab[v[seen].astype(np.int64), u[seen].astype(np.int64)]
+        got[seen] = lab[v[seen], u[seen]]
         inside &= ~seen | (got != BACKGROUND)  # a view without the point in frame says nothing
         person += seen & (got == PERSON)
     hits = (inside & (person >= min_person_views)).reshape(len(pixels), len(zs))

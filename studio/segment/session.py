@@ -44,6 +44,7 @@ from studio.segment.background import BackgroundModel
 from studio.segment.classify import PERSON, SHADOW, Thresholds
 from studio.segment.errors import SegmentationError
 from studio.segment.morphology import Morphology, person_components
+from studio.segment.preparation import background_model, floor_grid, registered, registration_shifts
 from studio.segment.skin import SkinClassifier
 from studio.segment.static import StaticChanges, absolute_spec, ignore_masks
 from studio.segment.voting import FloorVotes, ShadowVoter
@@ -127,7 +128,7 @@ def _load_state(spec: dict) -> dict:
         return _STATE
     ws = Workspace.open(spec["path"], out=spec["out"])
     options = spec["options"]
-    models = {cam: _registered(BackgroundModel.load(ws.layout.background_model_dir(cam)).with_settings(
+    models = {cam: registered(BackgroundModel.load(ws.layout.background_model_dir(cam)).with_settings(
         options.thresholds, options.morphology), spec["registration"].get(cam)) for cam in ws.camera_names}
     skin_file = options.skin_model
     skin = {cam: SkinClassifier.load(skin_file if skin_file is not None else ws.layout.skin_model(cam))
@@ -139,7 +140,7 @@ def _load_state(spec: dict) -> dict:
                   "hull": spec["hull"], "static_frames": int(options.static_frames),
                   "ignore": ignore_masks(options.ignore, {c: models[c].shape for c in models}),
                   "calibration": calib, "overlay_every": int(options.overlay_every), "skin": skin,
-                  "grid": _floor_grid(calib, options.floor_resolution) if calib is not None else None})
+                  "grid": floor_grid(calib, options.floor_resolution) if calib is not None else None})
     _STATE["token"] = spec["token"]
     return _STATE
 
@@ -229,67 +230,6 @@ def _process_frame(index: int) -> dict:
 
 
 # ---------------------------------------------------------------------- preparation
-def _background_model(ws, cam: str, options: SegmentOptions) -> BackgroundModel:
-    session = ws.session
-    folder = ws.layout.background_model_dir(cam)
-    model = None
-    if (folder / "model.json").is_file() and not options.refit_background:
-        model = BackgroundModel.load(folder)
-        log.info("camera %s: background model loaded from %s", cam, folder)
-    else:
-        indices = session.background_indices(cam)
-        if not indices:
-            raise SegmentationError(
-                f"session {session.path}: camera {cam!r} has no empty-scene frames in "
-                f"background/{cam}/ (capture a few frames of the empty scene first)"
-            )
-        model = BackgroundModel.fit(session.backgrounds(cam))
-        model = model.with_settings(options.thresholds, options.morphology)
-        model.save(folder)
-        log.info("camera %s: background model fitted on %d frames", cam, len(indices))
-    model = model.with_settings(options.thresholds, options.morphology)
-    w, h = session.image_size(cam)
-    if model.shape != (h, w):
-        raise SegmentationError(
-            f"{folder}: the background model is {model.shape[1]}x{model.shape[0]}, camera {cam!r}'s "
-            f"frames are {w}x{h} (refit it with --refit-background)"
-        )
-    return model
-
-
-def _registered(model: BackgroundModel, shift) -> BackgroundModel:
-    return model if not shift or (shift[0] == 0 and shift[1] == 0) else model.shifted(*shift)
-
-
-def _registration(ws, models: dict, frames: list[int], options: SegmentOptions, count: int = 5) -> dict:
-    """Per camera ``[dx, dy]`` by which the session's frames are moved against the empty scene
-    (median over ``count`` frames spread over the session, to 0.1 px; shifts under 0.25 px are
-    noise: 0)."""
-    if not options.register:
-        return {}
-    sample = sorted({frames[int(i)] for i in np.linspace(0, len(frames) - 1, min(count, len(frames))).round()})
-    images = [ws.session.frame(i) for i in sample]
-    out = {}
-    for cam, model in models.items():
-        dx, dy = model.estimate_shift([im[cam] for im in images])
-        # to 0.1 px: a rerun on another selection of frames keeps the same settings (and its frames)
-        out[cam] = [round(dx, 1), round(dy, 1)] if np.hypot(dx, dy) >= 0.25 else [0.0, 0.0]
-        if out[cam] != [0.0, 0.0]:
-            log.info("camera %s: frames moved by (%.2f, %.2f) px against the empty scene: model registered",
-                     cam, *out[cam])
-    return out
-
-
-def _floor_grid(calib, resolution: float):
-    from calibration import FloorGrid
-
-    centres = np.array([calib[c].center for c in calib.camera_names])
-    xy = calib.ground.to_plane_coords(centres)
-    lo, hi = xy.min(axis=0), xy.max(axis=0)
-    pad = 0.1 * float(np.max(hi - lo)) + 0.5
-    return FloorGrid((lo[0] - pad, hi[0] + pad), (lo[1] - pad, hi[1] + pad), resolution)
-
-
 def _skin_models(ws, state: dict, frames: list[int], options: SegmentOptions) -> dict:
     cameras = state["cameras"]
     if not options.skin:
@@ -411,9 +351,9 @@ def segment_session(
         ws.check_writable(ws.layout.segmentation_dir)
     except WorkspaceError as exc:
         raise SegmentationError(str(exc)) from None
-    models = {cam: _background_model(ws, cam, options) for cam in cameras}
-    registration = _registration(ws, models, frames, options)
-    models = {cam: _registered(m, registration.get(cam)) for cam, m in models.items()}
+    models = {cam: background_model(ws, cam, options) for cam in cameras}
+    registration = registration_shifts(ws, models, frames, options)
+    models = {cam: registered(m, registration.get(cam)) for cam, m in models.items()}
     voting = options.voting and len(cameras) >= 2
     hull = options.hull and len(cameras) >= 2
     try:
@@ -425,7 +365,7 @@ def segment_session(
     state = {"path": str(ws.path), "out": str(ws.layout.root), "cameras": cameras, "models": models,
              "calibration": calib, "voting": voting, "hull": hull, "bridges": bool(options.bridges),
              "overlay_every": int(options.overlay_every),
-             "grid": _floor_grid(calib, options.floor_resolution) if calib is not None else None, "skin": {},
+             "grid": floor_grid(calib, options.floor_resolution) if calib is not None else None, "skin": {},
              "largest_component": bool(options.largest_component), "static_frames": int(options.static_frames),
              "ignore": ignore_masks(options.ignore, {c: m.shape for c, m in models.items()})}  # fmt: skip
     _setup_state(state)

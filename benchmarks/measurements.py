@@ -127,7 +127,7 @@ def cmd_table(args) -> int:
     from studio.report.measurements import UNITS, frames_used, measurement_table
     from studio.report.uncertainty import session_uncertainty
 
-    args.temperature = unc_mod.TEMPERATURE if args.temperature is None else args.temperature
+    args.temperature = unc_mod.load_model_error()["temperature"] if args.temperature is None else args.temperature
     root = bench_root()
     rows = {d.name: [] for d in DEFINITIONS}
     people = []
@@ -204,7 +204,7 @@ def main(argv=None) -> int:
     t = sub.add_parser("table", help="measure the cached fits against the truth")
     t.add_argument("--people", type=int, default=4)
     t.add_argument("--temperature", type=float, default=None,
-                   help="posterior temperature (default: studio.report.uncertainty.TEMPERATURE)")
+                   help="posterior temperature (default: the shipped calibration's, benchmarks/measurement_intervals.py)")
     args = ap.parse_args(argv)
     return cmd_fit(args) if args.cmd == "fit" else cmd_table(args)
 

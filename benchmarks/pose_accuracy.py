@@ -143,7 +143,13 @@ VARIANTS = {"full": {}, "no-library": {"start": "stride"}, "no-rival": {"rival_h
             "dev-hybrid-outline": {"polish_outline": True}, "hybrid-outline": {"polish_outline": True},
             # issue 13: the shipped fit on the dev split grown to 32 people (16 new), to find failures
             # dev had not shown (the held-out half squat's search basin)
-            "dev-32": {}}
+            "dev-32": {},
+            # issue 13: the shipped fit on masks with the bridges (studio.segment.bridges), the dev split grown
+            # to 48 people (16 new, to look for the held-out half squat's search basin)
+            "dev-48": {},
+            # ... and the held-out people on masks with the bridges (the shipped segmentation; the same fitting code
+            # as hybrid)
+            "bridges": {}}
 STANDING = ("a_pose", "t_pose", "arms_overhead", "hands_on_hips", "arm_forward", "arms_crossed", "wide_stance",
             "torso_twist")
 

@@ -40,7 +40,7 @@ from studio.fit.errors import FitError
 from studio.fit.frame import FitOptions
 from studio.fit.result import FrameFit
 from studio.fit.quality import summary_line
-from studio.fit.units import MAX_TRACK_GAP, fit_unit, frame_fit_code_digest, stored_fit
+from studio.fit.units import MAX_TRACK_GAP, fit_unit, frame_fit_code_digest, segmentation_identity, stored_fit
 
 __all__ = ["CHAIN_LENGTH", "fit_session", "load_fits", "load_quality", "open_workspace", "plan_chains"]
 
@@ -150,7 +150,7 @@ def fit_session(
     t0 = time.perf_counter()
     total = len(frames)
     run = {"gender": gender, "seed": int(seed), "key_frame": frames[0], "options": options.to_dict(),
-           "code": frame_fit_code_digest()}
+           "code": frame_fit_code_digest(), "segmentation": segmentation_identity(ws.layout)}
     plan = plan_chains(frames, chain_length)
     if len(plan) > 1:  # recorded only when it splits: results of one chain keep their old settings
         run["chains"] = plan

@@ -24,6 +24,7 @@ whose floats round-trip exactly).
 
 from __future__ import annotations
 
+import hashlib
 import json
 import logging
 
@@ -33,7 +34,7 @@ from studio.fit.errors import FitError, UnusableFrame
 from studio.fit.frame import fit_frame, fit_frame_gender
 
 __all__ = ["FIT_CODE", "FRAME_FIT_EXCLUDES", "MAX_TRACK_GAP", "RECOVERY_FACTOR", "chain_state", "fit_code_digest",
-           "fit_unit", "frame_fit_code_digest", "stored_fit"]
+           "fit_unit", "frame_fit_code_digest", "segmentation_identity", "stored_fit"]
 
 log = logging.getLogger(__name__)
 
@@ -74,6 +75,17 @@ def frame_fit_code_digest() -> str:
     from studio.provenance import code_digest
 
     return code_digest(*FIT_CODE, files=(DATA_FILE,), exclude=FRAME_FIT_EXCLUDES)
+
+
+def segmentation_identity(layout) -> str | None:
+    """16-hex digest of the settings (with the code) the session's labels were written with
+    (``segmentation/segmentation.json``), or None without one: part of a run's settings, so a frame
+    fitted on masks since relabelled is fitted again."""
+    try:
+        settings = json.loads(layout.segmentation_summary.read_text()).get("settings")
+    except (OSError, ValueError, AttributeError):
+        return None
+    return None if settings is None else hashlib.sha256(json.dumps(settings, sort_keys=True).encode()).hexdigest()[:16]
 
 
 def stored_fit(layout, frame: int, run: dict) -> dict | None:

@@ -90,7 +90,7 @@ def gather(source, participant: Participant | None = None, *, posterior: bool = 
     from studio.fit import load_fits, load_quality
     from studio.fit.batch_session import load_batch
     from studio.report.measurements import frames_used, load_truth, measurement_table, use_batch_shape
-    from studio.report.uncertainty import session_uncertainty
+    from studio.report.uncertainty import load_model_error, session_uncertainty
     from studio.workspace import Layout, Workspace
 
     participant = participant or Participant()
@@ -104,7 +104,8 @@ def gather(source, participant: Participant | None = None, *, posterior: bool = 
     model = BodyModel.load(gender)
     sex = participant.sex or (gender if gender in ("female", "male") else "neutral")
     used, _ = frames_used(fits)
-    unc = {}
+    model_error = load_model_error()  # the model's own error needs no capture (uncertainty module doc, 4.)
+    unc = {"model": model_error["model_sigma"], "info": {"model_error_source": model_error["source"]}}
     if ws is None:
         try:
             ws = Workspace.open(lay.source, out=lay.root)

@@ -66,7 +66,7 @@ def _table_html(table: dict) -> str:
     """The measurement table: value ± σ, 95 % interval, ISO 20685-1, ANSUR II, quality, truth."""
     has_truth = any(r["truth"] is not None for r in table.values())
     head = ("<tr><th class=l>measurement</th><th class=l>definition</th><th>value</th><th>± σ</th><th>95 % interval</th>"
-            "<th>σ frames / calibration / fit</th><th>ISO 20685-1 limit</th><th>meets it</th>"
+            "<th>σ frames / calibration / fit / model</th><th>ISO 20685-1 limit</th><th>meets it</th>"
             "<th>ANSUR II percentile (z)</th><th class=l>quality</th>")
     head += "<th>truth</th><th>error</th>" if has_truth else ""
     rows = [head + "</tr>"]
@@ -78,7 +78,7 @@ def _table_html(table: dict) -> str:
         if st != "ok":  # a flagged figure never looks like a clean one
             value = f"<s>{value}</s> <b style='color:{_STATUS_STYLE[st]}'>({_esc(st)})</b>"
         ci = r.get("ci95") or [None, None]
-        comps = " / ".join(_fmt(r.get(k)) for k in ("sigma_frames", "sigma_calibration", "sigma_posterior"))
+        comps = " / ".join(_fmt(r.get(k)) for k in ("sigma_frames", "sigma_calibration", "sigma_posterior", "sigma_model"))
         ok = r.get("iso20685_ok")
         meets = "–" if ok is None else ("<span class=yes>yes</span>" if ok else "<span class=no>no</span>")
         pop = r.get("population")
@@ -206,7 +206,8 @@ def page_html(data, *, max_overlay_frames: int = 4, light: dict | None = None,
 <h2 class=first>Measurements</h2>
 <p>ISO 7250-1 definitions measured on the fitted body (mean shape over the frames used, standing pose; arm span with the arms
 horizontal). σ combines the spread over frames (standard error of the mean), the calibration's reprojection error carried to
-the body's surface, and the fit's own posterior ({post}). The ISO 20685-1:2018 column is the maximum allowable error of a
+the body's surface, the fit's own posterior ({post}), and the body model's error on people it never saw (learned on
+generated people, {_esc(data.uncertainty.get("info", {}).get("model_error_source", "not recorded"))}). The ISO 20685-1:2018 column is the maximum allowable error of a
 scan-derived measurement; “meets it” compares the 95 % half-width with it. Percentiles against ANSUR II (US Army, 2012) of the
 participant's sex. A figure resting on flagged frames or implausible against the population is struck through and marked.</p>
 {_batch_html(data.batch)}{_table_html(data.table)}

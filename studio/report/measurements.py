@@ -1,7 +1,7 @@
 """Measurement table of a fitted session: ISO 7250-1 definitions, honest uncertainty, population.
 
 One row per measurement of :data:`studio.body.iso7250.DEFINITIONS` (the fit and the truth by
-the same definitions): per-frame values, mean, spread over frames, the three uncertainty
+the same definitions): per-frame values, mean, spread over frames, the four uncertainty
 components of :mod:`studio.report.uncertainty` combined into a 95 % interval, the ISO
 20685-1:2018 maximum allowable error and whether the interval's half-width meets it, the
 ANSUR II percentile and z-score by sex, quality status with the reasons, and (simulated
@@ -84,7 +84,7 @@ def measurement_table(model, fits: dict, truth: dict | None = None, uncertainty:
     ``truth`` is its ``"studio"`` entry (the true person by the same definitions,
     :func:`studio.simulate.session.studio_truth`), else Anny's own value (``truth_source``
     says which); ``truth_anny`` / ``error_anny`` always Anny's. ``uncertainty`` {component:
-    {name: σ (SI)}} for ``calibration`` and ``posterior`` (:mod:`studio.report.uncertainty`);
+    {name: σ (SI)}} for ``calibration``, ``posterior`` and ``model`` (:mod:`studio.report.uncertainty`);
     ``sex`` for the population (default: the model's gender).
 
     Quality (:mod:`studio.fit.quality`): the mean is over the ``ok`` (or unchecked) frames;
@@ -135,7 +135,8 @@ def measurement_table(model, fits: dict, truth: dict | None = None, uncertainty:
         s_frames = std / np.sqrt(len(vals))
         s_cal = unc.get("calibration", {}).get(name)
         s_post = unc.get("posterior", {}).get(name)
-        sigma = combine(s_frames, None if s_cal is None else s_cal * scale, None if s_post is None else s_post * scale)
+        s_model = unc.get("model", {}).get(name)
+        sigma = combine(s_frames, *(None if s is None else s * scale for s in (s_cal, s_post, s_model)))
         mae = None if d.max_error is None else d.max_error * scale
         row = {
             "title": d.title, "clause": d.clause, "kind": d.kind, "definition": d.text, "unit": unit,
@@ -148,6 +149,7 @@ def measurement_table(model, fits: dict, truth: dict | None = None, uncertainty:
             "sigma_frames": float(s_frames),
             "sigma_calibration": None if s_cal is None else float(s_cal * scale),
             "sigma_posterior": None if s_post is None else float(s_post * scale),
+            "sigma_model": None if s_model is None else float(s_model * scale),
             "sigma": sigma,
             "ci95": [mean - 1.96 * sigma, mean + 1.96 * sigma],
             "iso20685_max_error": mae,

@@ -85,7 +85,7 @@ def write_pdf(data, path: str | Path) -> Path:
         t.auto_set_font_size(False)
         t.set_fontsize(6.5)
         t.scale(1, 1.5)
-        fig.text(0.06, 0.03, "ISO 7250-1 definitions; σ = frames ⊕ calibration ⊕ fit posterior. A struck figure in "
+        fig.text(0.06, 0.03, "ISO 7250-1 definitions; σ = frames ⊕ calibration ⊕ fit posterior ⊕ model error. A struck figure in "
                  "the HTML is marked ⚠ and shaded here (orange: suspect, red: failed).", fontsize=7)
         pdf.savefig(fig)
         plt.close(fig)

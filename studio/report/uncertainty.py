@@ -12,33 +12,43 @@
    a simulated session's calibration is exact (0 px); an unknown one is taken as
    :data:`ASSUMED_RMS_PX` and said so.
 3. **Fit posterior** (Laplace approximation): the silhouette cost (eq. 4.6) as a negative log
-   likelihood at temperature :data:`TEMPERATURE` (cost units, i.e. pixels of mean silhouette
+   likelihood at a temperature (:func:`load_model_error`; cost units, i.e. pixels of mean silhouette
    disagreement) plus the model's Gaussian shape prior N(0, σ²) on the leading
    :data:`N_LEADING` shape coefficients (those the fitter frees), pose held at the fit; its
-   Hessian by a quadratic fitted to the cost on a ±``STEP`` σ design, the covariance
-   carried into every measurement through its Jacobian (central differences of
-   :func:`studio.body.measure`).
+   Hessian by central differences of the cost at full resolution (the level the fit ends at)
+   with steps of ``STEP`` σ (:func:`shape_hessian`), the covariance carried into every
+   measurement through its Jacobian (central differences of :func:`studio.body.measure`).
+4. **Model**: what the first three do not see — the body model's and the fit's own error on
+   people it never saw (a SCAPE body is not an Anny body: e.g. girths +25 mm, arm span −29 mm on
+   the pose benchmark's dev people, the same sign for nearly everyone). One standard uncertainty
+   per measurement (:data:`MODEL_ERROR_FILE`), learned by ``benchmarks/measurement_intervals.py
+   calibrate`` on the dev split of ``benchmarks/pose_accuracy.py`` as the root mean square error
+   the other three leave unexplained; its coverage is measured on the held-out split.
 
 The combined standard uncertainty is the root sum of squares, the 95 % interval ±1.96 of it.
 """
 
 from __future__ import annotations
 
+import json
 import logging
+from pathlib import Path
 
 import numpy as np
 
 __all__ = [
     "ASSUMED_RMS_PX",
+    "MODEL_ERROR_FILE",
     "N_LEADING",
-    "TEMPERATURE",
     "calibration_rms",
     "calibration_sigma",
     "calibration_terms",
     "combine",
     "laplace_shape_covariance",
+    "load_model_error",
     "measurement_jacobian",
     "session_uncertainty",
+    "shape_hessian",
 ]
 
 log = logging.getLogger(__name__)
@@ -47,12 +57,26 @@ log = logging.getLogger(__name__)
 ASSUMED_RMS_PX = 0.5
 #: shape coefficients the posterior covers (the leading PCA directions)
 N_LEADING = 10
-#: cost units per unit of negative log likelihood (module doc, 3.). Chosen on the model-prior
-#: people of ``benchmarks/measurements.py`` (4 people, 18 lengths each): 95 % intervals held
-#: the truth 90 % of the time at 0.1, 92 % at 0.3, 97 % at 0.5; the walk's Anny woman: 100 %.
-TEMPERATURE = 0.5
-#: finite-difference step in prior standard deviations
-STEP = 0.25
+#: finite-difference step in prior standard deviations: the cost at full resolution is smooth over
+#: ±2 σ of a coefficient (dev frames), a 0.25 σ step moves it by 0.004–0.05, near the rasterisation's noise
+STEP = 0.5
+#: the model-error calibration (module doc, 4.): temperature and {measurement: σ (SI)}
+MODEL_ERROR_FILE = Path(__file__).with_name("data") / "model_error.json"
+
+
+def load_model_error(path: Path = MODEL_ERROR_FILE) -> dict:
+    """The shipped calibration: ``{"temperature": T, "model_sigma": {name: σ SI}, "source": ...}``.
+
+    ``temperature``: cost units per unit of negative log likelihood (module doc, 3.), chosen so that
+    a single frame's posterior explains the spread of its measurements over the person's other frames
+    (pooled median |z| = 0.674 on the pose benchmark's dev people); ``model_sigma`` (module doc, 4.)."""
+    try:
+        obj = json.loads(Path(path).read_text())
+        return {"temperature": float(obj["temperature"]), "model_sigma": {k: float(v) for k, v in obj["model_sigma"].items()},
+                "source": str(obj.get("source", path))}
+    except (OSError, ValueError, KeyError, TypeError) as exc:
+        raise ValueError(f"{path}: not a model-error calibration ({exc}); rebuild it with "
+                         "`benchmarks/measurement_intervals.py calibrate`") from exc
 
 
 def calibration_rms(calibration) -> tuple[dict[str, float], str]:
@@ -114,10 +138,17 @@ def measurement_jacobian(model, shape, names, k: int = N_LEADING) -> np.ndarray:
     return J
 
 
-def laplace_shape_covariance(model, cameras, masks, shape, pose, *, level: int = 1, k: int = N_LEADING,
-                             temperature: float = TEMPERATURE) -> np.ndarray:
-    """(k, k) posterior covariance of the first ``k`` shape coefficients of one fitted frame
-    (module doc, 3.): Hessian of cost/T fitted on a ±STEP·σ design, plus the prior's 1/σ²."""
+def shape_hessian(model, cameras, masks, shape, pose, *, level: int = 0, k: int = N_LEADING):
+    """((k, k) Hessian of the silhouette cost in the first ``k`` shape coefficients, (k,) their prior
+    σ) at one fitted frame, pose held (module doc, 3.).
+
+    Central differences with steps ``h = STEP`` σ: the diagonal from ``±h e_i``, each pair from
+    ``±(h e_i + h e_j)``; a direction whose curvature comes out ≤ 0 (the cost's kinks: the sum of
+    the pair terms is not exactly quadratic) is measured again along itself, so no direction
+    falls back on the prior. (The first release fitted a quadratic to random sign vectors at
+    level 1, where the cost's minimum is not at the fit: 3–5 of 10 curvatures came out ≤ 0 on every
+    dev frame and the prior's population spread stood as the posterior, waist σ 84 mm.)
+    """
     from studio.fit.frame import FitOptions, build_targets
     from studio.fit.objective import FrameObjective
 
@@ -126,27 +157,36 @@ def laplace_shape_covariance(model, cameras, masks, shape, pose, *, level: int =
     x0 = obj.pack(shape, pose)
     sigma = np.sqrt(np.asarray(model.eigenvalues, dtype=np.float64))[:k]
     h = STEP * sigma
-    # design: centre, ±h e_i (the curvature along each axis), and random ±h sign vectors (the
-    # couplings; 1.5 per coefficient pair, seeded): ~1 + 2k + 0.75 k² evaluations
-    rng = np.random.default_rng(0)
-    n_pairs = k * (k - 1) // 2
-    D = np.concatenate([np.zeros((1, k)), np.eye(k), -np.eye(k),
-                        rng.choice([-1.0, 1.0], size=(int(np.ceil(1.5 * n_pairs)) + 1, k))])
-    X = np.repeat(x0[None], len(D), axis=0)
-    X[:, -k:] += D * h
-    c = obj(X, level) / temperature
-    # quadratic in scaled coordinates u = d/h: c ≈ a + g·u + ½ uᵀ H u
-    iu = np.triu_indices(k)
-    cols = [np.ones(len(D))] + [D[:, i] for i in range(k)]
-    cols += [D[:, i] * D[:, j] * (0.5 if i == j else 1.0) for i, j in zip(*iu)]
-    coef = np.linalg.lstsq(np.stack(cols, axis=1), c, rcond=None)[0]
-    H = np.zeros((k, k))
-    H[iu] = coef[1 + k:]
-    H = H + np.triu(H, 1).T
+
+    def costs(D):
+        X = np.repeat(x0[None], len(D), axis=0)
+        X[:, -k:] += D * h
+        return obj(X, level)
+
+    i, j = np.triu_indices(k, 1)
+    pairs = np.zeros((len(i), k))
+    pairs[np.arange(len(i)), i] = pairs[np.arange(len(i)), j] = 1.0
+    c = costs(np.concatenate([np.zeros((1, k)), np.eye(k), -np.eye(k), pairs, -pairs]))
+    c0, axis = c[0], c[1:1 + k] + c[1 + k:1 + 2 * k]
+    H = np.diag(axis - 2 * c0)
+    cross = c[1 + 2 * k:1 + 2 * k + len(i)] + c[1 + 2 * k + len(i):]
+    H[i, j] = H[j, i] = 0.5 * (cross - axis[i] - axis[j] + 2 * c0)
     w, V = np.linalg.eigh(H)
-    H = (V * np.maximum(w, 0.0)) @ V.T  # a noisy cost may curve down: no information there
-    H = H / np.outer(h, h) + np.diag(1.0 / sigma**2)
-    return np.linalg.inv(H)
+    bad = np.flatnonzero(w <= 0)
+    if len(bad):
+        again = costs(np.concatenate([V[:, bad].T, -V[:, bad].T]))
+        w[bad] = np.maximum(again[:len(bad)] + again[len(bad):] - 2 * c0, 0.0)
+    return (V * w) @ V.T / np.outer(h, h), sigma
+
+
+def laplace_shape_covariance(model, cameras, masks, shape, pose, *, level: int = 0, k: int = N_LEADING,
+                             temperature: float | None = None) -> np.ndarray:
+    """(k, k) posterior covariance of the first ``k`` shape coefficients of one fitted frame
+    (module doc, 3.): the cost's Hessian (:func:`shape_hessian`) over T (default: the shipped
+    calibration's, :func:`load_model_error`), plus the prior's 1/σ²."""
+    temperature = load_model_error()["temperature"] if temperature is None else float(temperature)
+    H, sigma = shape_hessian(model, cameras, masks, shape, pose, level=level, k=k)
+    return np.linalg.inv(H / temperature + np.diag(1.0 / sigma**2))
 
 
 def combine(*sigmas) -> float:
@@ -156,19 +196,20 @@ def combine(*sigmas) -> float:
 
 def session_uncertainty(model, cameras, calibration, fits: dict, frames, masks_of, *, max_frames: int = 3,
                         temperature: float | None = None) -> dict:
-    """The calibration and posterior components (module doc) of a fitted session:
-    ``{"calibration": {name: σ}, "posterior": {name: σ}, "info": {...}}`` (SI units).
+    """The calibration, posterior and model components (module doc) of a fitted session:
+    ``{"calibration": {name: σ}, "posterior": {name: σ}, "model": {name: σ}, "info": {...}}`` (SI units).
 
     ``fits`` {frame: FrameFit}; ``frames`` the frames the measurements rest on; ``masks_of``
     ``frame -> list of (H, W) bool`` in ``cameras`` order, or None (no posterior: the session's
     segmentation is not at hand). The posterior averages the Laplace covariances of at most
-    ``max_frames`` of ``frames``; ``temperature`` defaults to :data:`TEMPERATURE`.
+    ``max_frames`` of ``frames``; ``temperature`` defaults to the shipped calibration's.
     """
     from studio.body import measure
     from studio.body.iso7250 import ISO_NAMES
 
     frames = list(frames)
-    temperature = TEMPERATURE if temperature is None else float(temperature)
+    model_error = load_model_error()
+    temperature = model_error["temperature"] if temperature is None else float(temperature)
     shape = np.mean([fits[f].shape for f in frames], axis=0)
     rms, source = calibration_rms(calibration)
     first = fits[frames[0]]
@@ -179,9 +220,10 @@ def session_uncertainty(model, cameras, calibration, fits: dict, frames, masks_o
     area = float(0.5 * np.linalg.norm(np.cross(b - a, c - a), axis=1).sum())
     values = measure(model, shape)
     out = {"calibration": calibration_terms(sigma_b, values, area), "posterior": {},
+           "model": model_error["model_sigma"],
            "info": {"calibration_rms_px": rms, "calibration_rms_source": source,
                     "surface_sigma_mm": 1000 * sigma_b, "posterior_frames": [], "n_leading": N_LEADING,
-                    "temperature": temperature}}
+                    "temperature": temperature, "model_error_source": model_error["source"]}}
     if masks_of is None:
         out["info"]["posterior_note"] = "no segmentation at hand: fit posterior not computed"
         return out

@@ -3,7 +3,7 @@
 Output, inside the session folder::
 
     segmentation/
-      segmentation.json             settings (with each camera's registration shift), per-camera
+      segmentation.json             settings (each camera's registration shift, the code's digest), per-camera
                                     statistics and mask quality (person fraction, components,
                                     clutter = share of person pixels outside the largest
                                     component, static / ignored pixels relabelled background;
@@ -49,7 +49,19 @@ from studio.segment.skin import SkinClassifier
 from studio.segment.static import StaticChanges, absolute_spec, ignore_masks
 from studio.segment.voting import FloorVotes, ShadowVoter
 
-__all__ = ["SegmentOptions", "SegmentationSummary", "segment_session"]
+__all__ = ["SEGMENT_CODE", "SegmentOptions", "SegmentationSummary", "segment_session", "segmentation_code_digest"]
+
+#: The code that decides a session's labels: part of the recorded settings, so frames labelled by
+#: other code are labelled again rather than kept (labels a development version had written under
+#: the same settings were once kept: two benchmark sessions fitted on masks without the bridges).
+SEGMENT_CODE = ("studio.segment", "studio.fit.init")
+
+
+def segmentation_code_digest() -> str:
+    """Digest of :data:`SEGMENT_CODE` (:func:`studio.provenance.code_digest`)."""
+    from studio.provenance import code_digest
+
+    return code_digest(*SEGMENT_CODE)
 
 log = logging.getLogger(__name__)
 
@@ -279,7 +291,7 @@ def _open(source, out=None):
 
 
 def _settings(models: dict, options: SegmentOptions, voting: bool, skin_cameras, registration: dict) -> dict:
-    """What decides a frame's outputs: a frame done with other settings is done again."""
+    """What decides a frame's outputs (the code too): a frame done with other settings is done again."""
     first = next(iter(models.values()))
     return {
         "thresholds": first.thresholds.to_dict(),
@@ -296,6 +308,7 @@ def _settings(models: dict, options: SegmentOptions, voting: bool, skin_cameras,
         "bridges": bool(options.bridges) and voting,
         "static_frames": int(options.static_frames),
         "ignore": [str(v) for v in options.ignore],
+        "code": segmentation_code_digest(),
     }
 
 
@@ -324,8 +337,8 @@ def segment_session(
     """Segment ``frames`` (default: all complete frames) of a session.
 
     ``source`` is a :class:`studio.workspace.Workspace` or a session folder (outputs then go
-    to ``out``, default the session). Frames already segmented with the same settings are
-    skipped (a rerun after an interruption continues where it stopped) unless ``force``.
+    to ``out``, default the session). Frames already segmented with the same settings (and
+    code, :func:`segmentation_code_digest`) are skipped (a rerun after an interruption continues where it stopped) unless ``force``.
     ``progress(done, total)`` is called after each frame. The frames run in this process
     (``workers`` 1), in ``workers`` local processes, or on the Dask cluster ``scheduler``
     (:func:`studio.execution.open_runner`). Raises :class:`SegmentationError`

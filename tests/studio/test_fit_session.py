@@ -182,6 +182,13 @@ def test_rerun_keeps_frames_fitted_with_the_same_settings(tmp_path, monkeypatch)
     fitted.clear()
     forced = fit_session(tmp_path / "s", gender="female", options=TINY, seed=1, force=True)
     assert forced["kept"] == [] and sorted(set(fitted)) == [1, 2]
+    # the masks relabelled since (other segmentation settings or code): nothing kept
+    summary = tmp_path / "s" / "segmentation" / "segmentation.json"
+    summary.write_text(json.dumps({"settings": {"voting": True, "code": "0" * 16}}))
+    fitted.clear()
+    relabelled = fit_session(tmp_path / "s", gender="female", options=TINY, seed=1)
+    assert relabelled["kept"] == [] and sorted(set(fitted)) == [1, 2]
+    assert fit_session(tmp_path / "s", gender="female", options=TINY, seed=1)["kept"] == [0, 1, 2]
 
 
 def test_unwritable_fit_folder_fails_before_any_work(tmp_path, monkeypatch):

@@ -67,3 +67,20 @@ def test_the_single_frame_digest_leaves_out_only_modules_a_single_frame_fit_neve
                 elif isinstance(node, ast.ImportFrom):
                     names += [f"{node.module}.{a.name}" for a in node.names]
                 assert not excluded & set(names), f"{dotted} imports {excluded & set(names)}: its digest must count it"
+
+
+def test_fit_run_names_the_segmentation(tmp_path):
+    """A frame fitted on masks since relabelled (other settings or other segmentation code) is not kept."""
+    from studio.fit.units import segmentation_identity
+    from studio.segment.session import segmentation_code_digest
+    from studio.workspace import Layout
+
+    layout = Layout(tmp_path)
+    assert segmentation_identity(layout) is None  # no segmentation recorded
+    layout.segmentation_summary.parent.mkdir(parents=True)
+    settings = {"voting": True, "bridges": True, "code": segmentation_code_digest()}
+    layout.segmentation_summary.write_text(json.dumps({"settings": settings}))
+    first = segmentation_identity(layout)
+    assert len(first) == 16
+    layout.segmentation_summary.write_text(json.dumps({"settings": {**settings, "code": "0" * 16}}))
+    assert segmentation_identity(layout) not in (None, first)

@@ -20,7 +20,7 @@ from studio.report.exports import TRC_NAMES, read_trc
 from studio.report.measurements import UNITS, measurement_table
 from studio.report.population import PERCENTILES_FILE, population_context, summarise_percentiles
 from studio.report.uncertainty import (calibration_rms, calibration_sigma, combine, laplace_shape_covariance,
-                                       session_uncertainty)
+                                       load_model_error, session_uncertainty, shape_hessian)
 from studio.simulate.silhouettes import write_silhouette_session
 from studio.workspace import Layout, Workspace
 
@@ -140,13 +140,31 @@ def test_uncertainty_components(session):
     from studio.fit import load_fits
 
     fits = load_fits(path)
-    C = laplace_shape_covariance(model, cams, ws.person_masks(0), fits[0].shape, fits[0].pose)
+    H, sigma = shape_hessian(model, cams, ws.person_masks(0), fits[0].shape, fits[0].pose)
+    assert np.allclose(H, H.T) and np.all(np.linalg.eigvalsh(H) > 0)  # every direction measured, none left to the prior
+    C = laplace_shape_covariance(model, cams, ws.person_masks(0), fits[0].shape, fits[0].pose, temperature=0.05)
+    assert np.allclose(C, np.linalg.inv(H / 0.05 + np.diag(1 / sigma**2)))
     prior = model.eigenvalues[:len(C)]
-    assert np.all(np.linalg.eigvalsh(C) > 0) and np.all(np.diag(C) <= prior * (1 + 1e-9))
-    assert C[0, 0] < 0.99 * prior[0]  # the silhouettes (here 100x75 px at level 1) inform the leading direction
+    assert np.all(np.linalg.eigvalsh(C) > 0) and np.all(np.diag(C) < prior)
+    assert C[0, 0] < 0.5 * prior[0]  # the silhouettes (200x150 px) pin the leading direction
+    hot = laplace_shape_covariance(model, cams, ws.person_masks(0), fits[0].shape, fits[0].pose, temperature=5.0)
+    assert np.all(np.diag(hot) > np.diag(C))  # a hotter likelihood informs less
     u = session_uncertainty(model, cams, ws.calibration, fits, [0, 1], ws.person_masks, max_frames=1)
     assert set(u["posterior"]) == set(UNITS) and u["info"]["posterior_frames"] == [0]
+    shipped = load_model_error()
+    assert u["model"] == shipped["model_sigma"] and set(shipped["model_sigma"]) == set(UNITS)
+    assert u["info"]["temperature"] == shipped["temperature"] and u["info"]["model_error_source"] == shipped["source"]
     assert u["calibration"]["chest_circumference"] == pytest.approx(2 * np.pi * u["info"]["surface_sigma_mm"] / 1000)
+
+
+def test_model_error_file(tmp_path):
+    bad = tmp_path / "model_error.json"
+    bad.write_text('{"temperature": 0.03}')
+    with pytest.raises(ValueError, match=r"model_error.json: not a model-error calibration .*'model_sigma'.*calibrate"):
+        load_model_error(bad)
+    shipped = load_model_error()
+    assert 0.002 <= shipped["temperature"] <= 2.0 and all(0.0 <= v < 0.05 for v in shipped["model_sigma"].values())
+    assert "dev split" in shipped["source"]  # learned on the dev people, never the held-out ones
 
 
 def test_population_percentiles(shared_data):

@@ -84,6 +84,10 @@ def test_table_row_by_hand():
     for key in ("truth", "error", "truth_source", "truth_anny", "error_anny"):
         assert row[key] is None
     assert "truth_in_ci95" not in row
+    # the model's own error joins the root sum of squares: √(1 + 4 + 4 + 2.4²) = 3.84
+    with_model = measurement_table(MODEL, fits, uncertainty={**unc, "model": {"stature": 0.0024}})["stature"]
+    assert with_model["sigma_model"] == pytest.approx(2.4, rel=1e-12)
+    assert with_model["sigma"] == pytest.approx(np.sqrt(9 + 2.4**2), rel=1e-9) and row["sigma_model"] is None
     # no uncertainty given: σ is the spread over frames alone; mass in kg (no ISO 20685-1 allowance)
     other = table["shoulder_height"]
     assert other["sigma_calibration"] is None and other["sigma_posterior"] is None

@@ -149,7 +149,10 @@ VARIANTS = {"full": {}, "no-library": {"start": "stride"}, "no-rival": {"rival_h
             "dev-48": {},
             # ... and the held-out people on masks with the bridges (the shipped segmentation; the same fitting code
             # as hybrid)
-            "bridges": {}}
+            "bridges": {},
+            # issue 13 / measurement reports: the girth bias (chest, hip, thigh +25 mm on dev, in every family)
+            # against a polish shape prior that pulls from the mean (threshold 0 σ), dev experiments
+            "dev-pull05": {"polish_shape_prior": (0.05, 0.0)}, "dev-pull20": {"polish_shape_prior": (0.2, 0.0)}}
 STANDING = ("a_pose", "t_pose", "arms_overhead", "hands_on_hips", "arm_forward", "arms_crossed", "wide_stance",
             "torso_twist")
 

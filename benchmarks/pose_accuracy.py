@@ -56,7 +56,9 @@ clipped at the pixel centres (code not kept). ``hybrid`` / ``dev-hybrid``: the s
 (:meth:`studio.body.BodyModel.search_model`, the previous pose deformation), the polish and last stage on the new
 model (digests ``7176b40d…`` / ``00161fec…``: the code before the library cache's key named the model, the same fits,
 checked); ``dev-search-body``: the same with a retry's shortlist cut after leaving out the avoided families (not
-kept). ``--families`` fits only the frames
+kept). ``dev-32`` / ``dev-48``: the shipped fit on the dev split grown to 32 / 48 people (``dev-48`` and the held-out
+``bridges``: on masks with the segmentation's bridges); ``dev-pull05`` / ``dev-pull20``: the polish's shape prior
+pulling from the mean (threshold 0 σ, weight 0.05 / 0.2; the girth bias, not kept). ``--families`` fits only the frames
 of the named posture families (e.g. ``--families seated`` for ``no-support``).
 
 Splits (``--split``): ``held-out`` (the default, seeds from 1000, only ever measured: the figures

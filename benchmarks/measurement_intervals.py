@@ -74,7 +74,7 @@ def _person(job: dict) -> dict | None:
         out["table"] = measurement_table(model, fits, truth, unc, sex=sex)
         return out
     table = measurement_table(model, fits, truth, None, sex=sex)
-    out["rows"] = {n: {k: r[k] for k in ("unit", "error", "frames_used", "per_frame", "sigma_frames", "kind")}
+    out["rows"] = {n: {k: r[k] for k in ("error", "frames_used", "per_frame", "sigma_frames")}
                    for n, r in table.items() if r["error"] is not None}
     frames = {}
     for f in used:
@@ -85,13 +85,6 @@ def _person(job: dict) -> dict | None:
     out["J_mean"] = U.measurement_jacobian(model, np.mean([fits[f].shape for f in used], axis=0), ISO_NAMES).tolist()
     out["names"] = list(ISO_NAMES)
     return out
-
-
-def _posterior_sd(H, sigma, J, T) -> np.ndarray:
-    """(M,) measurement σ (SI) of a Laplace covariance (uncertainty module doc, 3.)."""
-    C = np.linalg.inv(np.asarray(H) / T + np.diag(1.0 / np.asarray(sigma) ** 2))
-    J = np.asarray(J)
-    return np.sqrt(np.maximum(np.einsum("ij,jk,ik->i", J, C, J), 0.0))
 
 
 def _run(step: str, args) -> list[dict]:
@@ -109,7 +102,7 @@ def _run(step: str, args) -> list[dict]:
 def calibrate(args) -> int:
     from rigs.atomic import atomic_write_json
     from studio.report.measurements import UNITS
-    from studio.report.uncertainty import MODEL_ERROR_FILE
+    from studio.report.uncertainty import MODEL_ERROR_FILE, measurement_sd, posterior_covariance
 
     if args.split != "dev":
         print("calibrate learns from the dev split only (the held-out people are for `check`)", file=sys.stderr)
@@ -117,9 +110,10 @@ def calibrate(args) -> int:
     people = _run("calibrate", args)
     names = people[0]["names"]
     mm = [n for n in names if UNITS[n][0] == "mm"]
+    scales = np.array([UNITS[n][1] for n in names])
 
     def frame_sd(p, T):  # {frame: (M,) σ in report units}
-        return {f: _posterior_sd(d["H"], d["sigma"], d["J"], T) * np.array([UNITS[n][1] for n in names])
+        return {f: measurement_sd(d["J"], posterior_covariance(d["H"], d["sigma"], T)) * scales
                 for f, d in p["frames"].items()}
 
     def median_z(T):
@@ -146,11 +140,9 @@ def calibrate(args) -> int:
             r = p["rows"].get(n)
             if r is None:
                 continue
-            first = list(p["frames"].values())[:3]
-            C = np.mean([np.linalg.inv(np.asarray(d["H"]) / T + np.diag(1.0 / np.asarray(d["sigma"]) ** 2))
-                         for d in first], axis=0)
-            J = np.asarray(p["J_mean"])[i]
-            post = float(np.sqrt(max(J @ C @ J, 0.0))) * scale
+            # the report's posterior: the covariances of the first 3 frames used, averaged
+            C = np.mean([posterior_covariance(d["H"], d["sigma"], T) for d in list(p["frames"].values())[:3]], axis=0)
+            post = float(measurement_sd(np.asarray(p["J_mean"])[i:i + 1], C)[0]) * scale
             e2.append(r["error"] ** 2)
             known.append(r["sigma_frames"] ** 2 + post**2)
         model_sigma[n] = float(np.sqrt(max(np.mean(e2) - np.mean(known), 0.0))) / scale

@@ -104,8 +104,6 @@ def gather(source, participant: Participant | None = None, *, posterior: bool = 
     model = BodyModel.load(gender)
     sex = participant.sex or (gender if gender in ("female", "male") else "neutral")
     used, _ = frames_used(fits)
-    model_error = load_model_error()  # the model's own error needs no capture (uncertainty module doc, 4.)
-    unc = {"model": model_error["model_sigma"], "info": {"model_error_source": model_error["source"]}}
     if ws is None:
         try:
             ws = Workspace.open(lay.source, out=lay.root)
@@ -114,6 +112,9 @@ def gather(source, participant: Participant | None = None, *, posterior: bool = 
     if ws is not None and ws.calibration is not None:
         masks_of = ws.person_masks if posterior else None
         unc = session_uncertainty(model, ws.cameras, ws.calibration, fits, used, masks_of)
+    else:  # the model's own error needs no capture (uncertainty module doc, 4.)
+        model_error = load_model_error()
+        unc = {"model": model_error["model_sigma"], "info": {"model_error_source": model_error["source"]}}
     table = measurement_table(model, fits, load_truth(lay), unc, sex=sex)
     shape = np.mean([fits[f].shape for f in used], axis=0)
     first = fits[used[0]]

@@ -47,6 +47,8 @@ __all__ = [
     "laplace_shape_covariance",
     "load_model_error",
     "measurement_jacobian",
+    "measurement_sd",
+    "posterior_covariance",
     "session_uncertainty",
     "shape_hessian",
 ]
@@ -185,8 +187,19 @@ def laplace_shape_covariance(model, cameras, masks, shape, pose, *, level: int =
     (module doc, 3.): the cost's Hessian (:func:`shape_hessian`) over T (default: the shipped
     calibration's, :func:`load_model_error`), plus the prior's 1/σ²."""
     temperature = load_model_error()["temperature"] if temperature is None else float(temperature)
-    H, sigma = shape_hessian(model, cameras, masks, shape, pose, level=level, k=k)
-    return np.linalg.inv(H / temperature + np.diag(1.0 / sigma**2))
+    return posterior_covariance(*shape_hessian(model, cameras, masks, shape, pose, level=level, k=k), temperature)
+
+
+def posterior_covariance(H, sigma, temperature: float) -> np.ndarray:
+    """(k, k) Laplace covariance from the cost's Hessian ``H`` (k, k) at temperature T and the prior's
+    σ (k,): ``(H / T + diag(1/σ²))⁻¹`` (module doc, 3.)."""
+    return np.linalg.inv(np.asarray(H) / temperature + np.diag(1.0 / np.asarray(sigma) ** 2))
+
+
+def measurement_sd(J, C) -> np.ndarray:
+    """(M,) standard deviations of measurements with Jacobian ``J`` (M, k) under covariance ``C`` (k, k)."""
+    J = np.asarray(J)
+    return np.sqrt(np.maximum(np.einsum("ij,jk,ik->i", J, C, J), 0.0))
 
 
 def combine(*sigmas) -> float:
@@ -240,6 +253,6 @@ def session_uncertainty(model, cameras, calibration, fits: dict, frames, masks_o
         return out
     C = np.mean(covs, axis=0)
     J = measurement_jacobian(model, shape, ISO_NAMES)
-    sd = np.sqrt(np.maximum(np.einsum("ij,jk,ik->i", J, C, J), 0.0))
+    sd = measurement_sd(J, C)
     out["posterior"] = {n: float(s) for n, s in zip(ISO_NAMES, sd, strict=True)}
     return out

@@ -45,16 +45,16 @@ def bridge_regions(labels: np.ndarray, min_area: int = 30) -> np.ndarray:
         return np.zeros(labels.shape, bool)
     m, regions = cv2.connectedComponents((labels == SHADOW).astype(np.uint8), connectivity=8)
     # person components 8-adjacent to each shadow region: every (region, component) pair across a
-    # pixel and its neighbour
-    pairs = set()
+    # pixel and its neighbour, coded region · n + component
     h, w = labels.shape
     pad_c = np.pad(comp, 1)
+    codes = []
     for dy in (-1, 0, 1):
         for dx in (-1, 0, 1):
             nb = pad_c[1 + dy:1 + dy + h, 1 + dx:1 + dx + w]
             sel = (regions > 0) & big[nb]
-            pairs.update(zip(regions[sel].tolist(), nb[sel].tolist()))
-    touching = np.bincount([r for r, _ in pairs], minlength=m)
+            codes.append(regions[sel].astype(np.int64) * n + nb[sel])
+    touching = np.bincount(np.unique(np.concatenate(codes)) // n, minlength=m)
     return touching[regions] >= 2
 
 

@@ -154,7 +154,13 @@ VARIANTS = {"full": {}, "no-library": {"start": "stride"}, "no-rival": {"rival_h
             "bridges": {},
             # issue 13 / measurement reports: the girth bias (chest, hip, thigh +25 mm on dev, in every family)
             # against a polish shape prior that pulls from the mean (threshold 0 σ), dev experiments
-            "dev-pull05": {"polish_shape_prior": (0.05, 0.0)}, "dev-pull20": {"polish_shape_prior": (0.2, 0.0)}}
+            "dev-pull05": {"polish_shape_prior": (0.05, 0.0)}, "dev-pull20": {"polish_shape_prior": (0.2, 0.0)},
+            # ... the coarse levels' observed masks no longer dilated by half a pixel (not landed: git branch
+            # experiment/checkerboard-ties, studio.cost.downsample_mask's half-set blocks on a checkerboard)
+            "dev-ties": {},
+            # ... the polish's coefficients past the search's 10 pulled to the mean, Gaussian weight 0.2 / 1 (not
+            # landed: git branch experiment/tail-prior, polish_shape_prior's third element)
+            "dev-tail20": {}, "dev-tail100": {}}
 STANDING = ("a_pose", "t_pose", "arms_overhead", "hands_on_hips", "arm_forward", "arms_crossed", "wide_stance",
             "torso_twist")
 

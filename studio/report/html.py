@@ -177,6 +177,7 @@ def page_html(data, *, max_overlay_frames: int = 4, light: dict | None = None,
     post = (f"Laplace approximation over the {unc.get('n_leading')} leading shape coefficients on frame(s) "
             f"{_esc(unc.get('posterior_frames'))}, temperature {unc.get('temperature')}"
             if unc.get("posterior_frames") else _esc(unc.get("posterior_note", "not computed")))
+    model_source = unc.get("model_error_source", "not recorded")
     m = data.measured
     rest = body_views(data.rest_vertices, data.faces, size=(480, 720), points=m.points, lines=m.lines)
     posed = body_views(data.posed_vertices, data.faces, azimuths=(0, 45, 90), size=(480, 720))
@@ -207,7 +208,7 @@ def page_html(data, *, max_overlay_frames: int = 4, light: dict | None = None,
 <p>ISO 7250-1 definitions measured on the fitted body (mean shape over the frames used, standing pose; arm span with the arms
 horizontal). σ combines the spread over frames (standard error of the mean), the calibration's reprojection error carried to
 the body's surface, the fit's own posterior ({post}), and the body model's error on people it never saw (learned on
-generated people, {_esc(data.uncertainty.get("info", {}).get("model_error_source", "not recorded"))}). The ISO 20685-1:2018 column is the maximum allowable error of a
+generated people, {_esc(model_source)}). The ISO 20685-1:2018 column is the maximum allowable error of a
 scan-derived measurement; “meets it” compares the 95 % half-width with it. Percentiles against ANSUR II (US Army, 2012) of the
 participant's sex. A figure resting on flagged frames or implausible against the population is struck through and marked.</p>
 {_batch_html(data.batch)}{_table_html(data.table)}

@@ -33,6 +33,9 @@ single-pose on every measurement, gender by batch ≥ 98 %.
     # two processes side by side (about twice the throughput on 2 cores: much of a run is serial)
     ... run --subjects 20 --poses 11 --only 0 1 2 3 4 5 6 7 8 9 & ... run --subjects 20 --poses 11 --only 10 11 …
     .venv/bin/python benchmarks/clothing.py table
+    # longer than one machine lives: --ledger on run and table keeps the finished subjects in
+    # benchmarks/ledger/clothing/full/ (commit them); the next machine's run (same fitting code) skips them
+    ... run --subjects 20 --poses 11 --ledger --only … ; ... table --subjects 20 --poses 11 --ledger
     # everyday subset: 2 subjects (one of each sex) × 4 postures, tight and loose
     ... build --quick ; ... run --quick ; ... table
     # --clothing auto's coverage threshold: the loose batch body's share of the clothing pixels
@@ -67,8 +70,13 @@ MEASURES = ("stature", "chest_circumference", "waist_circumference", "hip_circum
 THESIS_GENDER = {"single": 86.0, "vote": 90.6, "batch": 94.3}
 
 
-#: ``full`` or ``quick`` (set by ``--quick``), ``dev-`` in front for the dev split: separate caches.
-RUN = {"name": "full", "first_seed": FIRST_SEED}
+#: ``full`` or ``quick`` (set by ``--quick``), ``dev-`` in front for the dev split: separate caches;
+#: ``ledger``: also keep the results in the repository (``--ledger``).
+RUN = {"name": "full", "first_seed": FIRST_SEED, "ledger": False}
+#: Results kept in the repository, per cache name: the full run takes longer than a machine of ours
+#: lives (about 3.5 h on 2 cores), so each machine commits the subjects it finished and the next
+#: one, with the same fitting code, continues from them (``run --ledger``; ``table --ledger``).
+LEDGER = ROOT / "benchmarks" / "ledger" / "clothing"
 
 
 def bench_root() -> Path:
@@ -237,9 +245,10 @@ def run_one(p: dict, condition: str, workers: int) -> dict:
 
 
 def run(args) -> int:
-    root = bench_root()
+    from rigs.atomic import atomic_write_json
     from studio.fit.units import fit_code_digest
 
+    root = bench_root()
     results = root / "results"
     results.mkdir(parents=True, exist_ok=True)
     code = fit_code_digest()
@@ -255,15 +264,29 @@ def run(args) -> int:
             path = results / f"{p['name']}_{cond}.json"
             if path.is_file() and json.loads(path.read_text()).get("code") == code:
                 continue  # done by this fitting code (results of other code are redone, as its fits are)
+            kept = ledger_result(path.name, code)
+            if kept is not None:  # done on an earlier machine by this fitting code
+                atomic_write_json(path, kept)
+                continue
             t = time.perf_counter()
             r = run_one(p, cond, args.workers)
             r["time_total_s"] = time.perf_counter() - t
             r["code"] = code
-            from rigs.atomic import atomic_write_json
-
             atomic_write_json(path, r)
+            if RUN["ledger"]:
+                atomic_write_json(LEDGER / RUN["name"] / path.name, r)
             print(f"{p['name']} {cond}: done in {r['time_total_s']:.0f} s", flush=True)
     return table(args)
+
+
+def ledger_result(name: str, code: str) -> dict | None:
+    """Result ``name`` from the repository's ledger when ``--ledger`` is on and it was written by
+    fitting code ``code``, else None."""
+    path = LEDGER / RUN["name"] / name
+    if not RUN["ledger"] or not path.is_file():
+        return None
+    r = json.loads(path.read_text())
+    return r if r.get("code") == code else None
 
 
 def coverage(args) -> int:
@@ -380,7 +403,10 @@ def summarise(rows: list[dict]) -> dict:
 def table(args) -> int:
     from rigs.atomic import atomic_write_json
 
-    rows = [json.loads(p.read_text()) for p in sorted((bench_root() / "results").glob("*.json"))]
+    paths = {p.name: p for p in sorted((bench_root() / "results").glob("*.json"))}
+    if RUN["ledger"]:  # the ledger's results this machine has not (fetched by `run` when it redoes nothing)
+        paths = {p.name: p for p in sorted((LEDGER / RUN["name"]).glob("*.json"))} | paths
+    rows = [json.loads(paths[k].read_text()) for k in sorted(paths)]
     if not rows:
         print("no results yet: run `build` then `run`")
         return 1
@@ -437,6 +463,10 @@ def main(argv=None) -> int:
     ap.add_argument("--cache", default=None, metavar="NAME",
                     help="the cache folder's name (default: full, or quick with --quick; dev- in front for the dev "
                          "split), e.g. another posture count than a cache was built with")
+    ap.add_argument("--ledger", action="store_true",
+                    help=f"also keep the results in {LEDGER.relative_to(ROOT)}/<cache>/ (commit them) and take "
+                         "those of this fitting code from there: a run longer than one machine's life continues "
+                         "on the next")
     ap.add_argument("--real-skin", action="store_true", help="also the skin classifier on ../shared/data/skin")
     ap.add_argument("--split", choices=sorted(SPLIT_SEEDS), default="report",
                     help="report: seeds 2000+ (the reported figures); dev: seeds 3000+ (choose settings here)")
@@ -449,6 +479,7 @@ def main(argv=None) -> int:
     if args.only and not all(0 <= i < args.subjects for i in args.only):
         ap.error(f"--only: expected subject indices in 0..{args.subjects - 1}, got {args.only}")
     RUN["first_seed"] = SPLIT_SEEDS[args.split]
+    RUN["ledger"] = args.ledger
     if args.split != "report":
         RUN["name"] = f"{args.split}-{RUN['name']}"
     return {"build": build, "run": run, "table": table, "coverage": coverage}[args.step](args)

@@ -32,22 +32,29 @@ from studio.fit.objective import FrameObjective
 if TYPE_CHECKING:
     from studio.fit.batch import BatchFrame, BatchOptions
 
-__all__ = ["KNEE_INDICES", "KNEE_SIGMA", "ClothedObjective", "clothing_residuals", "clothing_targets", "head_band",
+__all__ = ["KNEE_INDICES", "KNEE_SIGMA", "STRAIGHT_CAP", "ClothedObjective", "clothing_residuals", "clothing_targets", "head_band",
            "knee_term", "on_floor", "with_head_skin"]
 
 #: pose-vector indices of the knee hinges (the lower legs' joint angles)
 KNEE_INDICES = tuple(pose_slices()[PART_NAMES.index(p)].start for p in ("lowerleg_l", "lowerleg_r"))
 #: scale of the knee term (rad): a deviation of this much from the single fit costs ``weight``
 KNEE_SIGMA = float(np.radians(10.0))
+#: cap of the straight-knee prior per knee, in units of (θ / σ)²: 9 = a 30° bend (beyond it the
+#: prior no longer grows, so the silhouettes decide)
+STRAIGHT_CAP = 9.0
 
 
-def knee_term(poses: np.ndarray, reference: np.ndarray, weight: float, sigma: float = KNEE_SIGMA) -> np.ndarray:
-    """``weight · Σ_knees ((θ_k − θ_k^single) / σ)²`` per pose (N,) of poses (N, POSE_SIZE),
-    ``reference`` the single-frame fit's pose (POSE_SIZE,)."""
+def knee_term(poses: np.ndarray, reference: np.ndarray | None, weight: float, sigma: float = KNEE_SIGMA,
+              cap: float = np.inf) -> np.ndarray:
+    """``weight · Σ_knees min(((θ_k − θ_k^ref) / σ)², cap)`` per pose (N,) of poses (N, POSE_SIZE),
+    ``reference`` a pose (POSE_SIZE,), e.g. the single-frame fit's, or None for the rest pose
+    (straight knees, θ = 0). ``cap`` bounds what one knee can cost (a robust prior: a bend the
+    silhouettes show pays at most ``weight · cap`` and stays)."""
     poses = np.atleast_2d(np.asarray(poses, dtype=np.float64))
     idx = list(KNEE_INDICES)
-    d = (poses[:, idx] - np.asarray(reference, dtype=np.float64)[idx]) / sigma
-    return float(weight) * np.sum(d * d, axis=1)
+    ref = 0.0 if reference is None else np.asarray(reference, dtype=np.float64)[idx]
+    d = (poses[:, idx] - ref) / sigma
+    return float(weight) * np.sum(np.minimum(d * d, cap), axis=1)
 
 
 def head_band(mask: np.ndarray, fraction: float) -> np.ndarray:
@@ -133,11 +140,13 @@ class ClothedObjective(FrameObjective):
     """:class:`FrameObjective` whose targets are :class:`~studio.cost.ClothingTarget` s: the
     silhouette term is eq. 6.1 (inside + expansion) instead of eq. 4.5. ``floor``: every mesh
     stands on the floor (:func:`on_floor`; the root height is then ignored); ``knee_weight`` > 0
-    adds :func:`knee_term` about ``knee_ref`` (a pose)."""
+    adds :func:`knee_term` about ``knee_ref`` (a pose), ``straight_weight`` > 0 the capped
+    :func:`knee_term` about straight knees (``STRAIGHT_CAP``)."""
 
     floor: bool = False
     knee_weight: float = 0.0
     knee_ref: np.ndarray | None = None
+    straight_weight: float = 0.0
 
     def meshes(self, X: np.ndarray) -> np.ndarray:
         V = super().meshes(X)
@@ -152,7 +161,10 @@ class ClothedObjective(FrameObjective):
         X = np.atleast_2d(np.asarray(X, dtype=np.float64))
         sp, lp = self.priors(X)
         self.n_evaluations += len(X)
-        knee = knee_term(self.split(X)[1], self.knee_ref, self.knee_weight) if self.knee_weight > 0 else 0.0
+        poses = self.split(X)[1]
+        knee = knee_term(poses, self.knee_ref, self.knee_weight) if self.knee_weight > 0 else 0.0
+        if self.straight_weight > 0:
+            knee = knee + knee_term(poses, None, self.straight_weight, cap=STRAIGHT_CAP)
         return self.silhouettes(self.meshes(X), level) + self.prior_weight * (sp + lp) + knee
 
     def terms(self, x: np.ndarray, level: int = 0) -> dict:

@@ -205,6 +205,8 @@ def _segment_frame(index: int, state: dict) -> tuple[dict, dict, dict]:
             quality[cam]["hull_dropped"] = dropped.get(cam, 0)
         if state.get("bridge_cameras"):
             quality[cam]["bridged"] = bridged.get(cam, 0)
+        if voter is not None:
+            quality[cam]["relabelled"] = int(relabelled.get(cam, 0))
         quality[cam].update(changes.get(cam, {}))
     state["last_quality"] = quality
     return frame, labels, relabelled
@@ -323,6 +325,19 @@ def _done_frames(ws, frames: list[int], settings: dict) -> list[int]:
     return [i for i in frames if all(ws.layout.labels(c, i).is_file() for c in ws.camera_names)]
 
 
+def _stored_frame_quality(ws, frames: list[int], cameras: list[str]) -> dict:
+    """The per-frame quality the last run of the summary recorded for ``frames`` ({"i": {camera:
+    figures}}; frames it has not for every camera of ``cameras`` are left out)."""
+    if not frames:
+        return {}
+    try:
+        stored = json.loads(ws.layout.segmentation_summary.read_text()).get("frame_quality") or {}
+    except (OSError, ValueError):
+        return {}
+    return {str(i): stored[str(i)] for i in frames
+            if isinstance(stored.get(str(i)), dict) and all(c in stored[str(i)] for c in cameras)}
+
+
 def segment_session(
     source,
     options: SegmentOptions = SegmentOptions(),
@@ -338,7 +353,9 @@ def segment_session(
 
     ``source`` is a :class:`studio.workspace.Workspace` or a session folder (outputs then go
     to ``out``, default the session). Frames already segmented with the same settings (and
-    code, :func:`segmentation_code_digest`) are skipped (a rerun after an interruption continues where it stopped) unless ``force``.
+    code, :func:`segmentation_code_digest`) are skipped unless ``force``: a rerun after an
+    interruption continues where it stopped, keeping what the skipped frames' run measured
+    (``frame_quality``: voting relabels, bridges, hull).
     ``progress(done, total)`` is called after each frame. The frames run in this process
     (``workers`` 1), in ``workers`` local processes, or on the Dask cluster ``scheduler``
     (:func:`studio.execution.open_runner`). Raises :class:`SegmentationError`
@@ -404,6 +421,9 @@ def segment_session(
         "skin_cameras": sorted(state["skin"]),
         "status": "running",
     }
+    # what the skipped frames' run measured (voting, bridges, hull), kept in the summary from the start
+    kept_quality = _stored_frame_quality(ws, skipped, cameras)
+    summary["frame_quality"] = kept_quality
     # the settings go down first: a rerun after a kill knows which finished frames it may keep
     atomic_write_json(ws.layout.segmentation_summary, summary, fsync=False)
     folders = [ws.layout.labels(cam, 0).parent for cam in cameras]
@@ -417,8 +437,9 @@ def segment_session(
     results = []
     for i in skipped:
         stored = {c: read_image(ws.layout.labels(c, i)) for c in cameras}
-        results.append({"index": i, "relabelled": {}, "fractions": {c: _fractions(v) for c, v in stored.items()},
-                        "quality": {c: person_components(v)[1] for c, v in stored.items()}})
+        quality = kept_quality.get(str(i)) or {c: person_components(v)[1] for c, v in stored.items()}
+        results.append({"index": i, "relabelled": {c: q.get("relabelled", 0) for c, q in quality.items()},
+                        "fractions": {c: _fractions(v) for c, v in stored.items()}, "quality": quality})
     total = len(frames)
     if skipped:
         log.info("%d of %d frame(s) already segmented with the same settings: skipped (--force redoes them)",

@@ -6,7 +6,7 @@ import pytest
 from studio.body.skeleton import POSE_SIZE, pose_slices
 from studio.cost import ClothingTarget, clothing_cost
 from studio.fit.batch import BatchOptions
-from studio.fit.batch_terms import KNEE_INDICES, KNEE_SIGMA, head_band, knee_term, with_head_skin
+from studio.fit.batch_terms import KNEE_INDICES, KNEE_SIGMA, STRAIGHT_CAP, head_band, knee_term, with_head_skin
 
 
 def test_knee_indices_are_the_knee_hinges():
@@ -25,6 +25,15 @@ def test_knee_term_numbers():
     np.testing.assert_allclose(knee_term(poses[1], ref, 0.0), [0.0])
     ref[KNEE_INDICES[0]] = KNEE_SIGMA
     np.testing.assert_allclose(knee_term(poses[1], ref, 0.05), [0.0])
+
+
+def test_straight_knee_term_is_capped_about_the_rest_pose():
+    poses = np.zeros((4, POSE_SIZE))
+    poses[1, KNEE_INDICES[1]] = -2 * KNEE_SIGMA  # one knee 20 degrees (either way)
+    poses[2, KNEE_INDICES[0]] = 3 * KNEE_SIGMA  # at the cap
+    poses[3, list(KNEE_INDICES)] = np.radians(100.0)  # a lunge: both knees cost the cap, no more
+    np.testing.assert_allclose(knee_term(poses, None, 0.05, cap=STRAIGHT_CAP), [0.0, 0.2, 0.45, 0.9])
+    np.testing.assert_allclose(knee_term(poses[3], None, 0.05)[0], 0.05 * 2 * (np.radians(100.0) / KNEE_SIGMA) ** 2)
 
 
 def test_head_band_takes_the_top_rows_of_the_silhouette():
@@ -57,5 +66,5 @@ def test_head_skin_switches_the_head_to_full_expansion():
 
 def test_options_default_off():
     o = BatchOptions()
-    assert o.knee_weight == 0.0 and o.head_skin == 0.0
+    assert o.knee_weight == 0.0 and o.head_skin == 0.0 and o.straight_knees == 0.0
     assert o.to_dict()["knee_weight"] == 0.0

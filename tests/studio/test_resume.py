@@ -80,3 +80,26 @@ def test_segment_rerun_clears_a_killed_writers_temporary(tmp_path):
     again = segment_session(session, SegmentOptions(overlay_every=0, skin=False))
     assert again.skipped == [0, 1] and not left.exists()
     assert read_image(lay.labels("cam0", 1)).shape == (48, 64)
+
+
+def test_segment_rerun_keeps_what_the_skipped_frames_measured(tmp_path):
+    """A rerun that skips finished frames keeps their per-frame quality (voting relabels included)
+    as the run that segmented them recorded it, not figures recomputed from the stored labels."""
+    session = write_session(tmp_path / "s", size=(96, 72), frames=3)
+    lay = Layout(session)
+    first = segment_session(session, SegmentOptions(overlay_every=0, skin=False))
+    meta = json.loads(lay.segmentation_summary.read_text())
+    assert first.skipped == [] and set(meta["frame_quality"]) == {"0", "1", "2"}
+    assert all("relabelled" in q for f in meta["frame_quality"].values() for q in f.values())
+    again = segment_session(session, SegmentOptions(overlay_every=0, skin=False))
+    kept = json.loads(lay.segmentation_summary.read_text())
+    assert again.skipped == [0, 1, 2]
+    assert kept["frame_quality"] == meta["frame_quality"]
+    assert kept["relabelled_by_voting"] == meta["relabelled_by_voting"]
+    # a figure only the segmenting run knows survives the rerun (here: planted in the summary)
+    meta["frame_quality"]["1"]["cam0"]["bridged"] = 7
+    from rigs.atomic import atomic_write_json
+
+    atomic_write_json(lay.segmentation_summary, meta)
+    segment_session(session, SegmentOptions(overlay_every=0, skin=False))
+    assert json.loads(lay.segmentation_summary.read_text())["frame_quality"]["1"]["cam0"]["bridged"] == 7

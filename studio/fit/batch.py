@@ -99,10 +99,10 @@ class BatchOptions:
     ``straight_knees``: weight of a straight-knee prior in the pose steps (:func:`knee_term` about
     the rest pose, capped at :data:`~studio.fit.batch_terms.STRAIGHT_CAP`: a 30° bend) and a
     second Nelder–Mead start from the frame's pose with straight knees, the cheaper kept; 0: off.
-    Under wide trousers the single fits bend knees 46–82° where the truth stands at 7° and the
+    Under wide trousers the single fits bend knees 46–82° where the truth stands at 3–7° and the
     loose cost prefers it (0.46 against 0.55 per frame from straight knees on one dev frame: a bent
     knee fills the trousers' side view). On 6 dev people in loose clothes (4 postures, 5 in wide
-    trousers, gender given) weight 0.05 took the rest stature |err| 32.0 → 12.4 mm (4 of 6 within
+    trousers, gender given) weight 0.05 took the rest stature |err| 32.0 → 12.4 mm (3 of 6 within
     10 mm, 2 before), the hip |err| 184 → 65 mm and the rest-pose surface 17.8 → 16.7 mm, but the
     posed surface median 22.9 → 26.3 mm (a skirt's walk and lunge straightened: 15.2 → 28.2), chest
     |err| 34 → 104 mm; weights 0.02 / 0.1 and an uncapped term the same way. Off.

@@ -32,8 +32,8 @@ from studio.fit.objective import FrameObjective
 if TYPE_CHECKING:
     from studio.fit.batch import BatchFrame, BatchOptions
 
-__all__ = ["KNEE_INDICES", "KNEE_SIGMA", "STRAIGHT_CAP", "ClothedObjective", "clothing_residuals", "clothing_targets", "head_band",
-           "knee_term", "on_floor", "with_head_skin"]
+__all__ = ["KNEE_INDICES", "KNEE_SIGMA", "STRAIGHT_CAP", "ClothedObjective", "clothing_residuals", "clothing_targets",
+           "head_band", "knee_term", "on_floor", "with_head_skin"]
 
 #: pose-vector indices of the knee hinges (the lower legs' joint angles)
 KNEE_INDICES = tuple(pose_slices()[PART_NAMES.index(p)].start for p in ("lowerleg_l", "lowerleg_r"))

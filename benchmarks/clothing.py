@@ -263,6 +263,7 @@ def run(args) -> int:
         for cond in args.conditions:
             path = results / f"{p['name']}_{cond}.json"
             if path.is_file() and json.loads(path.read_text()).get("code") == code:
+                keep_in_ledger(path)
                 continue  # done by this fitting code (results of other code are redone, as its fits are)
             kept = ledger_result(path.name, code)
             if kept is not None:  # done on an earlier machine by this fitting code
@@ -273,10 +274,19 @@ def run(args) -> int:
             r["time_total_s"] = time.perf_counter() - t
             r["code"] = code
             atomic_write_json(path, r)
-            if RUN["ledger"]:
-                atomic_write_json(LEDGER / RUN["name"] / path.name, r)
+            keep_in_ledger(path)
             print(f"{p['name']} {cond}: done in {r['time_total_s']:.0f} s", flush=True)
     return table(args)
+
+
+def keep_in_ledger(path: Path) -> None:
+    """Result file ``path`` copied into the ledger when ``--ledger`` is on (and it is not there already)."""
+    from rigs.atomic import atomic_write_bytes
+
+    kept = LEDGER / RUN["name"] / path.name
+    data = path.read_bytes()
+    if RUN["ledger"] and (not kept.is_file() or kept.read_bytes() != data):
+        atomic_write_bytes(kept, data, mkdir=True)
 
 
 def ledger_result(name: str, code: str) -> dict | None:

@@ -34,7 +34,8 @@ PELVIS, HEAD = 0, 2
 HIPS, KNEES, ANKLES = (9, 12), (10, 13), (11, 14)
 #: variants: BatchOptions overrides
 VARIANTS: dict[str, dict] = {"base": {"floor": False}, "release": {"floor": False}, "floor": {"floor": True},
-                             "default": {}, "knee": {"knee_weight": 0.05}, "head": {"head_skin": 0.05}}
+                             "default": {}, "knee": {"knee_weight": 0.05}, "head": {"head_skin": 0.05},
+                             "straight": {"straight_knees": 0.05}}
 
 
 def _angle(a: np.ndarray, b: np.ndarray) -> float:

@@ -7,8 +7,20 @@ import importlib
 from pathlib import Path
 
 from studio.fit.units import FIT_CODE, FRAME_FIT_EXCLUDES, fit_code_digest, frame_fit_code_digest, stored_fit
-from studio.provenance import code_digest
+from studio.provenance import code_digest, source_key
 from studio.workspace.layout import Layout
+
+
+def test_source_key_ignores_docstrings_comments_and_layout_not_code():
+    base = b'"""Module."""\n\ndef f(x):\n    """Twice x."""\n    return 2 * x  # doubled\n\n\nclass C:\n    "C."\n    A = "a"\n'
+    same = b'"""Module, reworded."""\ndef f(x):\n    """Two times x."""\n    # a comment\n    return 2*x\nclass C:\n    A = "a"\n'
+    assert source_key(base) == source_key(same)
+    for changed in (base.replace(b"2 * x", b"3 * x"), base.replace(b'A = "a"', b'A = "b"'),
+                    base.replace(b"def f(x)", b"def f(y)")):
+        assert source_key(changed) != source_key(base)
+    only_doc = b'def g():\n    """Nothing else."""\n'
+    assert source_key(only_doc) == source_key(b"def g():\n    pass\n")
+    assert source_key(b"def (:\n") == b"def (:\n"  # what does not parse counts as its bytes
 
 
 def test_code_digest_covers_every_source_of_a_package(tmp_path, monkeypatch):

@@ -283,9 +283,10 @@ def keep_in_ledger(path: Path) -> None:
     """Result file ``path`` copied into the ledger when ``--ledger`` is on (and it is not there already)."""
     from rigs.atomic import atomic_write_bytes
 
-    kept = LEDGER / RUN["name"] / path.name
-    data = path.read_bytes()
-    if RUN["ledger"] and (not kept.is_file() or kept.read_bytes() != data):
+    if not RUN["ledger"]:
+        return
+    kept, data = LEDGER / RUN["name"] / path.name, path.read_bytes()
+    if not kept.is_file() or kept.read_bytes() != data:
         atomic_write_bytes(kept, data, mkdir=True)
 
 

@@ -314,26 +314,26 @@ def _settings(models: dict, options: SegmentOptions, voting: bool, skin_cameras,
     }
 
 
-def _done_frames(ws, frames: list[int], settings: dict) -> list[int]:
-    """Frames whose labels exist for every camera, written with the same ``settings``."""
+def _previous_summary(ws) -> dict:
+    """The ``segmentation.json`` a previous run left (finished or not), or {} without a readable one."""
     try:
-        stored = json.loads(ws.layout.segmentation_summary.read_text()).get("settings")
+        return json.loads(ws.layout.segmentation_summary.read_text())
     except (OSError, ValueError):
-        return []
-    if stored != settings:
+        return {}
+
+
+def _done_frames(ws, frames: list[int], settings: dict, previous: dict) -> list[int]:
+    """Frames whose labels exist for every camera, written with the same ``settings`` (the
+    ``previous`` run's, :func:`_previous_summary`)."""
+    if previous.get("settings") != settings:
         return []
     return [i for i in frames if all(ws.layout.labels(c, i).is_file() for c in ws.camera_names)]
 
 
-def _stored_frame_quality(ws, frames: list[int], cameras: list[str]) -> dict:
-    """The per-frame quality the last run of the summary recorded for ``frames`` ({"i": {camera:
-    figures}}; frames it has not for every camera of ``cameras`` are left out)."""
-    if not frames:
-        return {}
-    try:
-        stored = json.loads(ws.layout.segmentation_summary.read_text()).get("frame_quality") or {}
-    except (OSError, ValueError):
-        return {}
+def _kept_frame_quality(previous: dict, frames: list[int], cameras: list[str]) -> dict:
+    """The per-frame quality the ``previous`` run recorded for ``frames`` ({"i": {camera: figures}};
+    frames it has not for every camera of ``cameras`` are left out)."""
+    stored = previous.get("frame_quality") or {}
     return {str(i): stored[str(i)] for i in frames
             if isinstance(stored.get(str(i)), dict) and all(c in stored[str(i)] for c in cameras)}
 
@@ -407,7 +407,8 @@ def segment_session(
             "voting": voting, "hull": hull, "skin_cameras": sorted(state["skin"]), "registration": registration}
     settings = _settings(models, options, voting, state["skin"], registration)
     # persistence needs every frame from the first: with static changes nothing is kept
-    skipped = [] if force or options.static_frames > 0 else _done_frames(ws, frames, settings)
+    previous = {} if force or options.static_frames > 0 else _previous_summary(ws)
+    skipped = _done_frames(ws, frames, settings, previous)
     todo = [i for i in frames if i not in set(skipped)]
     summary = {
         "format": SUMMARY_FORMAT,
@@ -422,7 +423,7 @@ def segment_session(
         "status": "running",
     }
     # what the skipped frames' run measured (voting, bridges, hull), kept in the summary from the start
-    kept_quality = _stored_frame_quality(ws, skipped, cameras)
+    kept_quality = _kept_frame_quality(previous, skipped, cameras)
     summary["frame_quality"] = kept_quality
     # the settings go down first: a rerun after a kill knows which finished frames it may keep
     atomic_write_json(ws.layout.segmentation_summary, summary, fsync=False)

@@ -40,7 +40,8 @@ from studio.body import BodyModel
 from studio.body.skeleton import POSE_SIZE
 from studio.cost import CLOTHING_PRESETS, shape_prior
 from studio.fit.batch_gender import GENDER_PRIOR_WEIGHT, gender_scores, stature_evidence
-from studio.fit.batch_terms import KNEE_INDICES, ClothedObjective, clothing_residuals, clothing_targets, on_floor
+from studio.fit.batch_terms import (KNEE_INDICES, ClothedObjective, build_prior, clothing_residuals, clothing_targets,
+                                    on_floor, stature_direction)
 from studio.fit.errors import FitError
 from studio.fit.library import stand_on_floor
 from studio.fit.objective import parameter_box, pose_bounds
@@ -57,6 +58,8 @@ COST_RATIO_FLAG = 1.6
 #: single-frame fits of the held-out benchmark spread about ±15 mm; two adults differ by ~70 mm
 #: on average.
 STATURE_SPREAD_FLAG = 0.06
+#: weight of the build prior (:func:`~studio.fit.batch_terms.build_prior`) under loose clothing
+LOOSE_BUILD_WEIGHT = 0.01
 
 
 @dataclass(frozen=True)
@@ -106,6 +109,20 @@ class BatchOptions:
     10 mm, 2 before), the hip |err| 184 → 65 mm and the rest-pose surface 17.8 → 16.7 mm, but the
     posed surface median 22.9 → 26.3 mm (a skirt's walk and lunge straightened: 15.2 → 28.2), chest
     |err| 34 → 104 mm; weights 0.02 / 0.1 and an uncapped term the same way. Off.
+    ``build_weight``: weight of :func:`~studio.fit.batch_terms.build_prior` (the shared shape's
+    squared Mahalanobis distance from the mean body of its own stature, over the ``n_shape_free``
+    coefficients) in every shape step and batch cost; ``reset_tail``: the coefficients past
+    ``n_shape_free`` (which the shape steps do not free) start at the mean instead of the single
+    fits' mean. None: :data:`LOOSE_BUILD_WEIGHT` and a reset tail under loose clothing, neither
+    under tight. The loose batch starts from the single fits' bodies, which fill the clothes (hip
+    +341 mm on the full benchmark), and the flat prior (eq. 6.8) with λ_c's weak pull lets the shape
+    steps keep them (coefficients at ±2–3 σ, the tail at ±2 σ). On the 6 dev people in loose
+    clothes (4 postures, 5 in wide trousers, gender given; one run, all variants side by side)
+    the posed surface median per person went 20.8 / 26.2 / 22.5 / 25.3 / 25.6 / 15.2 mm (median 23.9)
+    → 18.8 / 24.0 / 17.9 / 25.5 / 21.9 / 14.6 (20.5) with weight 0.01 and the tail reset, chest / waist /
+    hip |err| 54 / 90 / 187 → 41 / 66 / 117 mm; weight 0.01 alone 22.4, the reset alone 20.0–25.8 per
+    person (first 5), weight 0.03 with the reset 18.0–26.9 with chest −158 and −106 mm on two people
+    (a heavy build pulled to the mean one).
     """
 
     clothing: str = "loose"
@@ -127,6 +144,8 @@ class BatchOptions:
     knee_weight: float = 0.0
     head_skin: float = 0.0
     straight_knees: float = 0.0
+    build_weight: float | None = None
+    reset_tail: bool | None = None
 
     def __post_init__(self):
         if self.clothing not in CLOTHING_PRESETS:
@@ -139,6 +158,8 @@ class BatchOptions:
             least = 0 if name in ("rounds", "final_evaluations", "pose_iterations") else 1
             if isinstance(value, bool) or not isinstance(value, int) or value < least:
                 raise FitError(f"{name}: expected an integer >= {least}, got {value!r}")
+        if self.build_weight is not None and not (np.isfinite(self.build_weight) and self.build_weight >= 0):
+            raise FitError(f"build_weight: expected a finite number >= 0, got {self.build_weight!r}")
 
     @property
     def polish_iterations(self) -> int:
@@ -149,6 +170,19 @@ class BatchOptions:
     def stands(self) -> bool:
         """Whether the bodies are stood on the floor (``floor``, or by default under loose clothing)."""
         return self.clothing == "loose" if self.floor is None else bool(self.floor)
+
+    @property
+    def build(self) -> float:
+        """``build_weight`` in force (given, or by default :data:`LOOSE_BUILD_WEIGHT` under loose
+        clothing, 0 under tight)."""
+        if self.build_weight is not None:
+            return float(self.build_weight)
+        return LOOSE_BUILD_WEIGHT if self.clothing == "loose" else 0.0
+
+    @property
+    def tail_reset(self) -> bool:
+        """``reset_tail`` in force (given, or by default under loose clothing)."""
+        return self.clothing == "loose" if self.reset_tail is None else bool(self.reset_tail)
 
     @property
     def cloth(self) -> tuple[float, float]:
@@ -163,6 +197,7 @@ class BatchOptions:
         out["tau_cloth"], out["cloth_weight"] = self.cloth
         out["floor"] = self.stands
         out["pose_iterations"] = self.polish_iterations
+        out["build_weight"], out["reset_tail"] = self.build, self.tail_reset
         return out
 
 
@@ -268,7 +303,16 @@ class _Batch:
         self.objs = [ClothedObjective(model, f.cameras, t, model.mean_shape(), 0, options.prior_weight)
                      for f, t in zip(frames, self.targets, strict=True)]  # (meshes stood on the floor in per_frame)
         self.sigma = np.sqrt(np.asarray(model.eigenvalues, dtype=np.float64))
+        self.direction = stature_direction(model, options.n_shape_free) if options.build > 0 else None
         self.n_evaluations = 0
+
+    def prior(self, shape: np.ndarray) -> float:
+        """The shared shape's prior: eq. 6.8 (``prior_weight``) and, under ``build_weight``, the
+        build at its own stature (:func:`~studio.fit.batch_terms.build_prior`)."""
+        out = self.options.prior_weight * shape_prior(shape, self.sigma)
+        if self.direction is not None:
+            out += self.options.build * build_prior(shape, self.sigma, self.direction)
+        return float(out)
 
     def per_frame(self, shape: np.ndarray, poses: np.ndarray, level: int) -> np.ndarray:
         """Clothing cost + joint-limit term (P,) of every frame for one shared shape."""
@@ -284,8 +328,7 @@ class _Batch:
 
     def total(self, shape: np.ndarray, poses: np.ndarray, level: int) -> float:
         """``E_clothes`` (eq. 6.7)."""
-        return float(self.per_frame(shape, poses, level).sum()
-                     + self.options.prior_weight * shape_prior(shape, self.sigma))
+        return float(self.per_frame(shape, poses, level).sum() + self.prior(shape))
 
     def shape_step(self, shape: np.ndarray, poses: np.ndarray, n_free: int, evaluations: int,
                    level: int | None = None) -> tuple[np.ndarray, float]:
@@ -445,6 +488,8 @@ def batch_fit(frames: list[BatchFrame], *, gender: str = "auto", options: BatchO
     t0 = time.perf_counter()
     first = BodyModel.load("neutral" if gender == "auto" else gender)
     shape0 = np.mean([convert_shape(BodyModel.load(f.gender), f.shape, first) for f in frames], axis=0)
+    if options.tail_reset:
+        shape0[options.n_shape_free:] = 0.0
     poses = np.array([f.pose for f in frames], dtype=np.float64)
     history: list = []
     shape, poses, batch = _alternate(runner, first, frames, shape0, poses, options, options.rounds,
@@ -488,7 +533,7 @@ def batch_fit(frames: list[BatchFrame], *, gender: str = "auto", options: BatchO
     if options.stands:
         poses = stand_on_floor(model, shape, poses)
     costs = batch.per_frame(shape, poses, final)
-    total = float(costs.sum() + options.prior_weight * shape_prior(shape, batch.sigma))
+    total = float(costs.sum() + batch.prior(shape))
     t = time.perf_counter()
     cons = consistency(model, shape, poses, frames, options)
     timings["consistency"] = round(time.perf_counter() - t, 3)

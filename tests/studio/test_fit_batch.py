@@ -332,3 +332,37 @@ def test_pose_polish_brings_a_bent_knee_back(frames):
     polished, c = pose_polish(model, replace(frame, pose=off), shape, off, opts)
     assert c_true < 1e-6 and c < 0.25 * c_off, (c, c_true, c_off)
     assert np.abs(polished[knee] - pose[knee]).max() < 0.05, polished[knee] - pose[knee]
+
+
+def test_loose_build_prior_pulls_the_hidden_build_to_the_mean_at_its_stature(frames):
+    """Under loose clothing nothing in the silhouettes holds a build the clothes hide: started from
+    a body 2.8 σ wide on the first coefficient, with a tail of the single fit's coefficients, the
+    batch with the build prior (the default under loose clothing: weight and a reset tail) ends
+    with a build nearer the mean body of its stature than the batch without it, at the same
+    stature."""
+    from dataclasses import replace
+
+    from studio.body import measure
+    from studio.fit.batch import LOOSE_BUILD_WEIGHT
+    from studio.fit.batch_terms import build_prior, stature_direction
+
+    model, fr = frames
+    f = fr["A0"][0]
+    sigma = np.sqrt(model.eigenvalues)
+    start = f.shape.copy()
+    start[0] = 2.8 * sigma[0]
+    start[3:8] = 1.5 * sigma[3:8]
+    opts = replace(BATCH, clothing="loose", rounds=1, pose_evaluations=10, shape_evaluations=60, final_evaluations=0)
+    assert opts.build == LOOSE_BUILD_WEIGHT > 0 and opts.tail_reset
+    assert opts.to_dict()["build_weight"] == LOOSE_BUILD_WEIGHT and opts.to_dict()["reset_tail"] is True
+    assert BatchOptions(clothing="tight").build == 0.0 and not BatchOptions(clothing="tight").tail_reset
+    frame = replace(f, shape=start)
+    on = batch_fit([frame], gender="female", options=opts)
+    off = batch_fit([frame], gender="female", options=replace(opts, build_weight=0.0, reset_tail=False))
+    g = stature_direction(model, opts.n_shape_free)
+    assert np.all(on.shape[opts.n_shape_free:] == 0.0)
+    np.testing.assert_array_equal(off.shape[opts.n_shape_free:], start[opts.n_shape_free:])
+    b_on, b_off = build_prior(on.shape, sigma, g), build_prior(off.shape, sigma, g)
+    assert b_on < 0.5 * b_off, (b_on, b_off)
+    h_on, h_off = measure(model, on.shape)["stature"], measure(model, off.shape)["stature"]
+    assert abs(h_on - h_off) < 0.01, (h_on, h_off)

@@ -68,3 +68,37 @@ def test_options_default_off():
     o = BatchOptions()
     assert o.knee_weight == 0.0 and o.head_skin == 0.0 and o.straight_knees == 0.0
     assert o.to_dict()["knee_weight"] == 0.0
+
+
+def test_stature_direction_predicts_the_statures_of_prior_bodies():
+    from studio.body import BodyModel, measure
+    from studio.fit.batch_terms import stature_direction
+
+    model = BodyModel.load("female")
+    g = stature_direction(model, 10)
+    assert g.shape == (10,)
+    sigma = np.sqrt(model.eigenvalues)
+    base = measure(model, np.zeros(model.n_shape))["stature"]
+    rng = np.random.default_rng(7)  # bodies not among the stored samples
+    z = rng.standard_normal((6, 10))
+    shapes = np.zeros((6, model.n_shape))
+    shapes[:, :10] = z * sigma[:10]
+    true = np.array([measure(model, s)["stature"] for s in shapes]) - base
+    pred = z @ g
+    assert np.std(true) > 0.02  # the statures spread by centimetres
+    assert np.sqrt(np.mean((pred - true) ** 2)) < 0.25 * np.std(true)
+
+
+def test_build_prior_is_free_along_the_stature_and_mahalanobis_across_it():
+    from studio.fit.batch_terms import build_prior
+
+    sigma = np.array([2.0, 1.0, 0.5])
+    g = np.array([3.0, 4.0, 0.0])
+    assert build_prior(g * 0.5 * sigma, sigma, g) == pytest.approx(0.0, abs=1e-12)
+    across = np.array([4.0, -3.0, 0.0]) / 5 * sigma  # unit z orthogonal to g
+    assert build_prior(across, sigma, g) == pytest.approx(1.0)
+    assert build_prior(np.array([0.0, 0.0, 1.0]), sigma, g) == pytest.approx(4.0)  # z = 2 off the stature
+    both = np.stack([across, 2 * across, np.zeros(3)])
+    np.testing.assert_allclose(build_prior(both, sigma, g), [1.0, 4.0, 0.0])
+    # only the first len(g) coefficients count
+    assert build_prior(np.r_[across, 5.0], np.r_[sigma, 1.0], g) == pytest.approx(1.0)

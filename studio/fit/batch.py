@@ -117,12 +117,13 @@ class BatchOptions:
     under tight. The loose batch starts from the single fits' bodies, which fill the clothes (hip
     +341 mm on the full benchmark), and the flat prior (eq. 6.8) with λ_c's weak pull lets the shape
     steps keep them (coefficients at ±2–3 σ, the tail at ±2 σ). On the 6 dev people in loose
-    clothes (4 postures, 5 in wide trousers, gender given; one run, all variants side by side)
-    the posed surface median per person went 20.8 / 26.2 / 22.5 / 25.3 / 25.6 / 15.2 mm (median 23.9)
-    → 18.8 / 24.0 / 17.9 / 25.5 / 21.9 / 14.6 (20.5) with weight 0.01 and the tail reset, chest / waist /
-    hip |err| 54 / 90 / 187 → 41 / 66 / 117 mm; weight 0.01 alone 22.4, the reset alone 20.0–25.8 per
-    person (first 5), weight 0.03 with the reset 18.0–26.9 with chest −158 and −106 mm on two people
-    (a heavy build pulled to the mean one).
+    clothes (4 postures, 5 in wide trousers, gender given; the variants side by side in one run,
+    the release's figures from the previous stop's run of the same harness, which repeats to ~1 mm)
+    the posed surface per person went 20.8 / 26.2 / 22.5 / 25.3 / 25.6 / 15.2 mm (median 23.9) →
+    18.8 / 24.0 / 17.9 / 25.5 / 21.9 / 14.6 (20.3) with weight 0.01 and the tail reset, chest / waist /
+    hip |err| 54 / 90 / 187 → 41 / 66 / 116 mm, the reported stature |err| 10.1 → 11.9 mm; weight 0.01
+    alone median 22.4, the reset alone 22.3, weight 0.03 with the reset 20.9 with chest −158 and −106 mm
+    on two people (a heavy build pulled to the mean one).
     """
 
     clothing: str = "loose"

@@ -343,8 +343,7 @@ def test_loose_build_prior_pulls_the_hidden_build_to_the_mean_at_its_stature(fra
     from dataclasses import replace
 
     from studio.body import measure
-    from studio.fit.batch import LOOSE_BUILD_WEIGHT
-    from studio.fit.batch_terms import build_prior, stature_direction
+    from studio.fit.batch_terms import LOOSE_BUILD_WEIGHT, build_prior, stature_direction
 
     model, fr = frames
     f = fr["A0"][0]

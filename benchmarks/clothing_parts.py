@@ -133,11 +133,12 @@ def main(argv=None) -> int:
     ap.add_argument("--cache", default=None, metavar="NAME", help="as clothing.py's --cache")
     ap.add_argument("--split", choices=sorted(clothing.SPLIT_SEEDS), default="report")
     ap.add_argument("--ledger", action="store_true", help="take the results kept in the ledger too")
+    ap.add_argument("--conditions", nargs="+", default=["tight", "loose"], choices=["tight", "loose"])
     args = ap.parse_args(argv)
     clothing.RUN["name"] = args.cache or ("quick" if args.quick else clothing.RUN["name"])
     if args.split != "report":
         clothing.RUN["name"] = f"{args.split}-{clothing.RUN['name']}"
-    rows = _rows(args)
+    rows = [r for r in _rows(args) if r["condition"] in args.conditions]
     if not rows:
         print("no results yet: run `clothing.py build` then `clothing.py run`")
         return 1

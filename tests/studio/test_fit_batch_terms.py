@@ -102,3 +102,21 @@ def test_build_prior_is_free_along_the_stature_and_mahalanobis_across_it():
     np.testing.assert_allclose(build_prior(both, sigma, g), [1.0, 4.0, 0.0])
     # only the first len(g) coefficients count
     assert build_prior(np.r_[across, 5.0], np.r_[sigma, 1.0], g) == pytest.approx(1.0)
+
+
+def test_shrink_build_keeps_the_stature_and_scales_the_build():
+    from studio.fit.batch_terms import build_prior, shrink_build
+
+    sigma = np.array([2.0, 1.0, 0.5, 3.0])
+    g = np.array([3.0, 4.0, 0.0])
+    beta = np.array([1.0, -2.0, 0.7, 9.0])  # the last coefficient is past len(g)
+    z = beta[:3] / sigma[:3]
+    np.testing.assert_allclose(shrink_build(beta, sigma, g, 1.0), beta)
+    mean = shrink_build(beta, sigma, g, 0.0)
+    assert build_prior(mean, sigma, g) == pytest.approx(0.0, abs=1e-12)  # the mean body of its stature
+    assert (mean[:3] / sigma[:3]) @ g == pytest.approx(z @ g)  # the stature's coordinate kept
+    assert mean[3] == 9.0
+    half = shrink_build(beta, sigma, g, 0.5)
+    assert build_prior(half, sigma, g) == pytest.approx(0.25 * build_prior(beta, sigma, g))
+    assert np.all(beta == np.array([1.0, -2.0, 0.7, 9.0]))  # the input untouched
+

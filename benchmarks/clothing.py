@@ -350,19 +350,30 @@ def _loose_stature_error_mm(batch: dict, true_stature: float) -> float:
     return 1000 * (height - true_stature)
 
 
-def loose_stature_error_mm(r: dict) -> float:
-    """:func:`_loose_stature_error_mm` of result ``r``: recorded, or for a result written before it
-    was, from the session's ``fit/batch.json`` (its frames and gender must be the result's)."""
-    if "loose_stature_error_mm" in r["batch"]:
-        return r["batch"]["loose_stature_error_mm"]
-    from studio.report.measurements import load_truth
+def session_batch(r: dict):
+    """(workspace, ``fit/batch.json`` content) of result ``r``'s session on this machine; stops with the
+    path when the session's batch is missing or not the result's (other frames or gender)."""
     from studio.workspace import Workspace
 
     ws = Workspace.open(bench_root() / r["subject"] / r["condition"] / "render" / "seed0")
-    b = json.loads(ws.layout.fit_dir.joinpath("batch.json").read_text())
+    path = ws.layout.fit_dir / "batch.json"
+    if not path.is_file():
+        raise SystemExit(f"{path}: missing; run `clothing.py run` for {r['subject']} {r['condition']} first")
+    b = json.loads(path.read_text())
     if b["frames"] != r["frames"] or b["gender"] != r["batch"]["gender"]:
-        raise SystemExit(f"{ws.layout.fit_dir / 'batch.json'}: frames {b['frames']} / gender {b['gender']}, the result "
-                         f"has {r['frames']} / {r['batch']['gender']}: run the subject again")
+        raise SystemExit(f"{path}: frames {b['frames']} / gender {b['gender']}, the result has {r['frames']} / "
+                         f"{r['batch']['gender']}: run the subject again")
+    return ws, b
+
+
+def loose_stature_error_mm(r: dict) -> float:
+    """:func:`_loose_stature_error_mm` of result ``r``: recorded, or for a result written before it
+    was, from the session's ``fit/batch.json`` (:func:`session_batch`)."""
+    if "loose_stature_error_mm" in r["batch"]:
+        return r["batch"]["loose_stature_error_mm"]
+    from studio.report.measurements import load_truth
+
+    ws, b = session_batch(r)
     return _loose_stature_error_mm(b, load_truth(ws.layout)["studio"]["stature"])
 
 
@@ -411,13 +422,19 @@ def summarise(rows: list[dict]) -> dict:
     return out
 
 
+def result_rows() -> list[dict]:
+    """The cache's results, and under ``--ledger`` the ledger's this machine has not (fetched by
+    `run` when it redoes nothing), by file name."""
+    paths = {p.name: p for p in sorted((bench_root() / "results").glob("*.json"))}
+    if RUN["ledger"]:
+        paths = {p.name: p for p in sorted((LEDGER / RUN["name"]).glob("*.json"))} | paths
+    return [json.loads(paths[k].read_text()) for k in sorted(paths)]
+
+
 def table(args) -> int:
     from rigs.atomic import atomic_write_json
 
-    paths = {p.name: p for p in sorted((bench_root() / "results").glob("*.json"))}
-    if RUN["ledger"]:  # the ledger's results this machine has not (fetched by `run` when it redoes nothing)
-        paths = {p.name: p for p in sorted((LEDGER / RUN["name"]).glob("*.json"))} | paths
-    rows = [json.loads(paths[k].read_text()) for k in sorted(paths)]
+    rows = result_rows()
     if not rows:
         print("no results yet: run `build` then `run`")
         return 1

@@ -66,28 +66,13 @@ def region_distances(fitted: np.ndarray, true: np.ndarray, faces: np.ndarray, re
     return out
 
 
-def _rows(args) -> list[dict]:
-    paths = {p.name: p for p in sorted((clothing.bench_root() / "results").glob("*.json"))}
-    if args.ledger:
-        paths = {p.name: p for p in sorted((clothing.LEDGER / clothing.RUN["name"]).glob("*.json"))} | paths
-    return [json.loads(paths[k].read_text()) for k in sorted(paths)]
-
-
 def subject_parts(r: dict) -> dict:
     """Per-frame region distances (mm) of one benchmark result's batch and single fits."""
     from studio.body import BodyModel
     from studio.fit import load_fits
     from studio.fit.evaluate import true_mesh
-    from studio.workspace import Workspace
 
-    ws = Workspace.open(clothing.bench_root() / r["subject"] / r["condition"] / "render" / "seed0")
-    path = ws.layout.fit_dir / "batch.json"
-    if not path.is_file():
-        raise SystemExit(f"{path}: missing; run `clothing.py run` for {r['subject']} {r['condition']} first")
-    b = json.loads(path.read_text())
-    if b["frames"] != r["frames"] or b["gender"] != r["batch"]["gender"]:
-        raise SystemExit(f"{path}: frames {b['frames']} / gender {b['gender']}, the result has {r['frames']} / "
-                         f"{r['batch']['gender']}: run the subject again")
+    ws, b = clothing.session_batch(r)
     bmodel = BodyModel.load(b["gender"])
     regions = region_faces(bmodel)
     shape = np.asarray(b["shape"])
@@ -138,7 +123,8 @@ def main(argv=None) -> int:
     clothing.RUN["name"] = args.cache or ("quick" if args.quick else clothing.RUN["name"])
     if args.split != "report":
         clothing.RUN["name"] = f"{args.split}-{clothing.RUN['name']}"
-    rows = [r for r in _rows(args) if r["condition"] in args.conditions]
+    clothing.RUN["ledger"] = args.ledger
+    rows = [r for r in clothing.result_rows() if r["condition"] in args.conditions]
     if not rows:
         print("no results yet: run `clothing.py build` then `clothing.py run`")
         return 1

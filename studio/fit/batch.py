@@ -16,11 +16,10 @@ single fits are.
 then, poses fixed, the first ``gender_shape_free`` coefficients of the female and of the male
 model are re-estimated from the neutral body; the lower score wins (its margin is reported) and
 is refined by one more round. The score is the batch cost (eq. 6.7) per frame plus
-:data:`GENDER_PRIOR_WEIGHT` × −2 log-likelihood of the neutral body's stature among that sex in
-ANSUR II (:func:`gender_scores`): the thesis' prior (eq. 6.8) is flat within 3 σ and under loose
-clothing the cost alone was fitting noise biased to the smaller female model (a loosely dressed
-man called female by 0.027 on a cost of 3.2; single poses 9 of 21 right on the dev split);
-stature is the measurement loose clothes hide least.
+:data:`~studio.fit.batch_gender.GENDER_PRIOR_WEIGHT` × −2 log-likelihood of the neutral body's
+stature among that sex in ANSUR II (:func:`gender_scores`). The weight is 0, the thesis' rule
+(the lower cost wins): from the mean build of its stature the loose cost separates the sexes,
+and a stature prior calls tall women male (the constant says how it was chosen).
 
 **Consistency** (§6.4.2: shape varies little with pose, much across people): the frames' own
 single-frame bodies and the batch body are scored by the same cost; when the shared shape
@@ -39,9 +38,10 @@ import numpy as np
 from studio.body import BodyModel
 from studio.body.skeleton import POSE_SIZE
 from studio.cost import shape_prior
-from studio.fit.batch_gender import GENDER_PRIOR_WEIGHT, gender_scores, stature_evidence
+from studio.fit.batch_gender import gender_scores
 from studio.fit.batch_terms import (KNEE_INDICES, BatchOptions, ClothedObjective, build_prior,
-                                    clothing_residuals, clothing_targets, on_floor, stature_direction)
+                                    clothing_residuals, clothing_targets, on_floor, shrink_build,
+                                    stature_direction)
 from studio.fit.errors import FitError
 from studio.fit.library import stand_on_floor
 from studio.fit.objective import parameter_box, pose_bounds
@@ -351,7 +351,6 @@ def batch_fit(frames: list[BatchFrame], *, gender: str = "auto", options: BatchO
     # the single fits' build under loose clothes is the clothes' (BatchOptions.start_build)
     keep = options.start_build if options.start_build is not None else (0.0 if options.clothing == "loose" else 1.0)
     if keep != 1.0:
-        from .batch_terms import shrink_build
         sig = np.sqrt(np.asarray(first.eigenvalues, dtype=np.float64))
         shape0 = shrink_build(shape0, sig, stature_direction(first, options.n_shape_free), keep)
     poses = np.array([f.pose for f in frames], dtype=np.float64)

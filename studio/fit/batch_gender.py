@@ -1,8 +1,9 @@
 """Gender by batch (thesis §6.4.5): the decision between the female and the male fits.
 
 :func:`studio.fit.batch.compare_genders` fits both gender models to a batch with the poses
-fixed; :func:`gender_scores` turns their costs into the decision: the batch cost (eq. 6.7) plus
-the stature evidence (:func:`stature_evidence`, ANSUR II), with the Mahalanobis distances of
+fixed; :func:`gender_scores` turns their costs into the decision: the batch cost (eq. 6.7) per
+frame plus :data:`GENDER_PRIOR_WEIGHT` (0 by default: the thesis' rule) × the stature evidence
+(:func:`stature_evidence`, ANSUR II), with the stature evidence and the Mahalanobis distances of
 the shapes in each gender's PCA reported beside.
 """
 
@@ -16,15 +17,16 @@ from studio.fit.errors import FitError
 __all__ = ["GENDER_PRIOR_WEIGHT", "gender_scores", "stature_evidence"]
 
 #: Weight of the stature evidence against the batch cost per frame in the gender decision
-#: (:func:`gender_scores`). First chosen against the summed cost on 4-posture dev batches (seeds
-#: 3000–3005, loose: every weight from 0.01 up 6 of 6); in 11-posture batches the sum weighed the
-#: cost ~3× more and the reported run called 3 of 40 batches wrong. Per frame, on the clothing
-#: benchmark's 11-posture dev split (``--split dev --cache p11``: seeds 3000–3007, tight and
-#: loose, 16 batches of 2–11 frames after the gates): the cost alone 14 of 16 (two loose men
-#: called female, per-frame costs +0.031 and +0.024), every weight in (0.073, 0.386) 16 of 16 (a
-#: 1.68 m man in tight clothes went female beyond it); the smallest of 0.01 / 0.02 / 0.05 / 0.1 /
-#: 0.2 / … inside it, since the dev split has no tall women nor short men to bound it from above.
-GENDER_PRIOR_WEIGHT = 0.1
+#: (:func:`gender_scores`); 0: the thesis' rule (§6.4.5), the lower batch cost wins, the stature
+#: evidence reported beside. History: 0.1 was chosen on an 11-posture dev split (seeds 3000–3007,
+#: where the cost alone called two loose men female) when the loose batch started from the single
+#: fits' build. With the loose batch starting from the mean build of its stature, re-chosen on a
+#: dev split of 16 batches (4 postures): the 6 loose people of seeds 3000–3005 (right by every
+#: weight) and, tight and loose, the tallest dev women (3013, 3015, 3039: 1.78, 1.83, 1.71 m) and
+#: shortest dev men (3030, 3074: 1.70, 1.65 m) of seeds 3006–3089 — right 13 of 16 by the cost
+#: alone and by weights up to 0.01, 12 at 0.02, 11 at 0.05 and at 0.1, 9 at 0.2: under the mean-build
+#: start the loose cost separates the sexes and the stature only trades tall women for short men.
+GENDER_PRIOR_WEIGHT = 0.0
 
 
 def _mahalanobis(model, shape: np.ndarray, k: int) -> float:

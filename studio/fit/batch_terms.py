@@ -347,6 +347,10 @@ class BatchOptions:
                 raise FitError(f"{name}: expected an integer >= {least}, got {value!r}")
         if self.build_weight is not None and not (np.isfinite(self.build_weight) and self.build_weight >= 0):
             raise FitError(f"build_weight: expected a finite number >= 0, got {self.build_weight!r}")
+        if self.start_build is not None and not (isinstance(self.start_build, (int, float))
+                                                 and not isinstance(self.start_build, bool)
+                                                 and 0.0 <= self.start_build <= 1.0):
+            raise FitError(f"start_build: expected a share in [0, 1] or None, got {self.start_build!r}")
 
     @property
     def polish_iterations(self) -> int:

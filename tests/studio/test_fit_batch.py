@@ -140,6 +140,8 @@ def test_gender_by_batch_reports_both_costs_and_the_margin(frames):
         assert terms[g]["score"] == pytest.approx(terms[g]["cost"] / 2 + GENDER_PRIOR_WEIGHT * terms[g]["stature"])
         assert terms[g]["score"] == res.gender_costs[g]
     assert res.to_json()["gender_terms"] == terms
+    # the default rule is the thesis' (§6.4.5): the lower batch cost wins, the stature evidence only reported
+    assert GENDER_PRIOR_WEIGHT == 0.0 and res.gender == min(terms, key=lambda g: terms[g]["cost"])
 
 
 class _Model:

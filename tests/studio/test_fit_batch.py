@@ -155,9 +155,9 @@ class _Model:
 
 def test_gender_decision_adds_the_stature_evidence():
     """A loosely dressed 1.86 m man (costs of dev subject 3002): the cost alone favours the female
-    model by 0.027; among ANSUR II adults 1.86 m is z = 3.61 for a woman, 1.51 for a man, so the
-    score (cost + 0.1 × (z² + 2 ln σ)) calls him male by 1.03. At 1.69 m the evidence is nearly
-    even (0.015 for the female model) and the cost decides."""
+    model by 0.027; among ANSUR II adults 1.86 m is z = 3.61 for a woman, 1.51 for a man, so a
+    stature weight of 0.1 (the previous default; score = cost + 0.1 × (z² + 2 ln σ)) calls him male
+    by 1.03. At 1.69 m the evidence is nearly even (0.015 for the female model) and the cost decides."""
     female, male = _Model([1.0, 2.0, 0.5, 1.0]), _Model([2.0, 1.0, 1.0, 1.0])
     # (model, re-estimated shape, batch cost, the batch body in that model's coefficients)
     cands = {"female": (female, np.array([0.5, 0.0, 0.0, 9.0]), 3.236, np.array([2.0, 1.6, 0.0, 9.0])),

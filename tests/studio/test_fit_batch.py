@@ -213,6 +213,8 @@ def test_frame_choice_and_bad_options(frames):
         BatchOptions(clothing="baggy")
     with pytest.raises(FitError, match="pose_evaluations: expected an integer >= 1"):
         BatchOptions(pose_evaluations=0)
+    with pytest.raises(FitError, match="rounds: expected an integer >= 0"):
+        BatchOptions(rounds=-1)
     for bad in (1.5, -0.1, float("nan"), True, "half"):
         with pytest.raises(FitError, match=r"start_build: expected a share in \[0, 1\] or None"):
             BatchOptions(start_build=bad)

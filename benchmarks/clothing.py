@@ -79,6 +79,16 @@ RUN = {"name": "full", "first_seed": FIRST_SEED, "ledger": False}
 LEDGER = ROOT / "benchmarks" / "ledger" / "clothing"
 
 
+def select_run(cache: str | None, quick: bool, split: str, ledger: bool) -> None:
+    """Set :data:`RUN` from the command line: the cache's name (``cache``, else ``quick`` or
+    ``full``; ``<split>-`` in front off the report split), the split's first seed, the ledger."""
+    RUN["name"] = cache or ("quick" if quick else "full")
+    if split != "report":
+        RUN["name"] = f"{split}-{RUN['name']}"
+    RUN["first_seed"] = SPLIT_SEEDS[split]
+    RUN["ledger"] = ledger
+
+
 def bench_root() -> Path:
     from studio.simulate.samples import cache_root
 
@@ -501,15 +511,9 @@ def main(argv=None) -> int:
     args = ap.parse_args(argv)
     if args.quick:
         args.subjects, args.poses = 2, 4
-        RUN["name"] = "quick"
-    if args.cache:
-        RUN["name"] = args.cache
     if args.only and not all(0 <= i < args.subjects for i in args.only):
         ap.error(f"--only: expected subject indices in 0..{args.subjects - 1}, got {args.only}")
-    RUN["first_seed"] = SPLIT_SEEDS[args.split]
-    RUN["ledger"] = args.ledger
-    if args.split != "report":
-        RUN["name"] = f"{args.split}-{RUN['name']}"
+    select_run(args.cache, args.quick, args.split, args.ledger)
     return {"build": build, "run": run, "table": table, "coverage": coverage}[args.step](args)
 
 

@@ -120,10 +120,7 @@ def main(argv=None) -> int:
     ap.add_argument("--ledger", action="store_true", help="take the results kept in the ledger too")
     ap.add_argument("--conditions", nargs="+", default=["tight", "loose"], choices=["tight", "loose"])
     args = ap.parse_args(argv)
-    clothing.RUN["name"] = args.cache or ("quick" if args.quick else clothing.RUN["name"])
-    if args.split != "report":
-        clothing.RUN["name"] = f"{args.split}-{clothing.RUN['name']}"
-    clothing.RUN["ledger"] = args.ledger
+    clothing.select_run(args.cache, args.quick, args.split, args.ledger)
     rows = [r for r in clothing.result_rows() if r["condition"] in args.conditions]
     if not rows:
         print("no results yet: run `clothing.py build` then `clothing.py run`")

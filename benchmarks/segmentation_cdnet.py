@@ -313,12 +313,7 @@ def _report(proto, rows, cv_rows, speed, mismatch, fixed_best, tune, evaluate, g
           f"{tune[0]}–{tune[-1]}, blocked {len(proto['folds'])}-fold CV over {len(evaluate)} frames "
           f"{evaluate[0]}–{evaluate[-1]} (blocks of {BLOCK}, gap {GAP}); adaptive grids {grid_cpu:.0f} s CPU / "
           f"{grid_wall:.0f} s wall; every method run over frames 1–{evaluate[-1]} in this run")  # fmt: skip
-    print(f"{'method':<44} {'recall':>7} {'precis.':>7} {'F':>7} {'FPR-S':>7} {'shadowP':>7} {'shadowR':>7} {'fps':>6}")
-    table = [(n, m, f"{speed[n]:6.0f}") for n, m in rows.items()]
-    table += [(f"{n} [CV]", m, "     —") for n, m in cv_rows.items()]
-    for name, m, fps in table:
-        print(f"{name:<44} {_fmt(m['recall']):>7} {_fmt(m['precision']):>7} {_fmt(m['f_measure']):>7} "
-              f"{_fmt(m['fpr_shadow']):>7} {_fmt(m['shadow_precision']):>7} {_fmt(m['shadow_recall']):>7} {fps}")  # fmt: skip
+    _print_rows({**rows, **{f"{n} [CV]": m for n, m in cv_rows.items()}}, speed)
     gsoc = rows["OpenCV GSOC"]
     verdict = {}
     for point, protocol, res in [(p, pr, r) for p in (TARGET, LABEL_FREE)
@@ -329,16 +324,7 @@ def _report(proto, rows, cv_rows, speed, mismatch, fixed_best, tune, evaluate, g
             print(f"   target ({key}): no point with tuning FPR-S ≤ 0.30 → MISSED")
             verdict[key] = {"f_met": False, "shadow_met": False}
             continue
-        f_met, shadow_met = ours["f_measure"] > gsoc["f_measure"], ours["fpr_shadow"] <= 0.30
-        verdict[key] = {"f_met": f_met, "shadow_met": shadow_met}
-        if "folds" in ours:  # each fold on its own: its point against GSOC on the same frames
-            verdict[key]["per_fold"] = [
-                {"f_met": o["f_measure"] > g["f_measure"], "shadow_met": o["fpr_shadow"] <= 0.30}
-                for o, g in zip(ours["folds"], gsoc["folds"])]  # fmt: skip
-        kind = "one point per fold, pooled" if "folds" in ours else "one point"
-        print(f"   target ({key}, {kind}): F above GSOC {ours['f_measure']:.3f} vs "
-              f"{gsoc['f_measure']:.3f} → {'MET' if f_met else 'MISSED'}; FPR-S ≤ 0.30: {ours['fpr_shadow']:.3f} → "
-              f"{'MET' if shadow_met else 'MISSED'}")  # fmt: skip
+        verdict[key] = _verdict(key, ours, gsoc)
     for name, tune_set in proto["tuning_sets"].items():
         free = proto["label_free"][name]
         print(f"   tuning set {name}: {len(tune_set)} frames, {proto['shadow_pixels'][name]} shadow pixels; "
@@ -355,18 +341,14 @@ def _report(proto, rows, cv_rows, speed, mismatch, fixed_best, tune, evaluate, g
                 s = pick[0]
                 print(f"      {point}: value_ratio {s.value_ratio} chroma {s.chroma} fraction "
                       f"{s.shadow_fraction if s.shadow_direction else '—'} (tuning F {pick[1]:.3f}, FPR-S {pick[2]:.3f})")
-    for point, sc in [*cv_rows.items(), ("OpenCV GSOC", gsoc)]:
-        folds = "; ".join(f"F {f['f_measure']:.3f} FPR-S {f['fpr_shadow']:.3f}" for f in sc["folds"])
-        print(f"   {point} per fold: {folds}")
+    _print_folds({**cv_rows, "OpenCV GSOC": gsoc})
     print(f"   cached grid vs apply (fixed split picks, summed |count differences|): {mismatch}")
     return {"tuning_frames": tune, "eval_frames": [evaluate[0], evaluate[-1], len(evaluate)],
             "protocol": {"block": BLOCK, "gap": GAP, "folds": proto["folds"], "tuning_sets": proto["tuning_sets"],
                          "tuning_shadow_pixels": proto["shadow_pixels"]},
             "methods": rows, "cross_validation": cv_rows, "frames_per_second": speed,
             "fixed_thresholds": fixed_best.to_dict(),
-            "adaptive_picks": {name: {p: None if c is None else {"settings": c[0].to_dict(), "tuning_f": c[1],
-                                                                 "tuning_fpr_shadow": c[2]}
-                                      for p, c in ps.items()} for name, ps in proto["picks"].items()},
+            "adaptive_picks": _picks_dict(proto),
             "learned": {name: {"labelled": {"tint": proto["tint"][name], "direction": proto["direction"][name]},
                                "label_free": {"tint": f.tint, "direction": f.direction, "pixels": f.pixels,
                                               "regions": f.regions, "frames": f.frames},
@@ -390,6 +372,33 @@ def _same_sequence(full: Path, shared: Path, last_gt: int) -> None:
         for name in (f"input/in{i:06d}.jpg", f"groundtruth/gt{i:06d}.png"):
             if not (full / name).is_file():
                 raise SystemExit(f"{full / name}: missing; expected frames and truth {UNSEEN[0]}–{UNSEEN[1]}")
+
+
+def _verdict(key: str, ours: dict, gsoc: dict) -> dict:
+    """The target at one pick (F above GSOC's on the same frames, FPR-S ≤ 0.30), printed; with
+    ``folds`` (cross-validation, pooled) each fold's too (:func:`_print_folds` prints them)."""
+    f_met, shadow_met = ours["f_measure"] > gsoc["f_measure"], ours["fpr_shadow"] <= 0.30
+    out = {"f_met": f_met, "shadow_met": shadow_met}
+    if "folds" in ours:  # each fold on its own: its point against GSOC on the same frames
+        out["per_fold"] = [{"f_met": o["f_measure"] > g["f_measure"], "shadow_met": o["fpr_shadow"] <= 0.30}
+                           for o, g in zip(ours["folds"], gsoc["folds"])]  # fmt: skip
+    kind = "one point per fold, pooled" if "folds" in ours else "one point"
+    print(f"   target ({key}, {kind}): F above GSOC {ours['f_measure']:.3f} vs {gsoc['f_measure']:.3f} → "
+          f"{'MET' if f_met else 'MISSED'}; FPR-S ≤ 0.30: {ours['fpr_shadow']:.3f} → "
+          f"{'MET' if shadow_met else 'MISSED'}")  # fmt: skip
+    return out
+
+
+def _picks_dict(proto: dict) -> dict:
+    """{tuning set: {point: settings and tuning figures, or None}} of :func:`adaptive_protocol`."""
+    return {name: {p: None if c is None else {"settings": c[0].to_dict(), "tuning_f": c[1], "tuning_fpr_shadow": c[2]}
+                   for p, c in ps.items()} for name, ps in proto["picks"].items()}
+
+
+def _print_folds(rows: dict) -> None:
+    for point, sc in rows.items():
+        print(f"   {point} per fold: " + "; ".join(f"F {f['f_measure']:.3f} FPR-S {f['fpr_shadow']:.3f}"
+                                                   for f in sc["folds"]))
 
 
 def _print_rows(rows: dict, speed: dict) -> None:
@@ -449,18 +458,8 @@ def bench_unseen(full: Path, shared: Path, proto: dict, fixed_model, quick: bool
           f"split's (tuned on {extended['shadow_pixels']['fixed']} shadow pixels of {first_gt}–{scored[0] - 1}; "
           f"grids {grid_cpu:.0f} s CPU / {grid_wall:.0f} s wall)")  # fmt: skip
     _print_rows({**rows, **cv_rows}, speed)
-    gsoc, verdict = rows["OpenCV GSOC"], {}
-    for key, ours in [(k, m) for k, m in {**rows, **cv_rows}.items() if "target" in k]:
-        f_met, shadow_met = ours["f_measure"] > gsoc["f_measure"], ours["fpr_shadow"] <= 0.30
-        verdict[key] = {"f_met": f_met, "shadow_met": shadow_met}
-        if "folds" in ours:
-            verdict[key]["per_fold"] = [{"f_met": o["f_measure"] > g["f_measure"], "shadow_met": o["fpr_shadow"] <= 0.30}
-                                        for o, g in zip(ours["folds"], gsoc["folds"])]  # fmt: skip
-            print(f"   {key} per fold: " + "; ".join(f"F {o['f_measure']:.3f} (GSOC {g['f_measure']:.3f}) FPR-S "
-                                                     f"{o['fpr_shadow']:.3f}" for o, g in zip(ours["folds"], gsoc["folds"])))
-        print(f"   target ({key}): F above GSOC {ours['f_measure']:.3f} vs {gsoc['f_measure']:.3f} → "
-              f"{'MET' if f_met else 'MISSED'}; FPR-S ≤ 0.30: {ours['fpr_shadow']:.3f} → "
-              f"{'MET' if shadow_met else 'MISSED'}")  # fmt: skip
+    verdict = {k: _verdict(k, m, rows["OpenCV GSOC"]) for k, m in {**rows, **cv_rows}.items() if "target" in k}
+    _print_folds({**cv_rows, "OpenCV GSOC": rows["OpenCV GSOC"]})
     for point, pick in extended["picks"]["fixed"].items():
         if pick is not None:
             s = pick[0]
@@ -469,7 +468,5 @@ def bench_unseen(full: Path, shared: Path, proto: dict, fixed_model, quick: bool
     return {"frames": [scored[0], scored[-1], len(scored)], "shadow_pixels": shadow_px, "shadow_frames": shadow_frames,
             "source": str(full), "methods": rows, "cross_validation": cv_rows, "frames_per_second": speed,
             "target": verdict, "extended_tuning_shadow_pixels": extended["shadow_pixels"],
-            "extended_picks": {name: {p: None if c is None else {"settings": c[0].to_dict(), "tuning_f": c[1],
-                                                                 "tuning_fpr_shadow": c[2]}
-                                      for p, c in ps.items()} for name, ps in extended["picks"].items()},
+            "extended_picks": _picks_dict(extended),
             "grid_cpu_s": grid_cpu, "grid_wall_s": grid_wall}

@@ -348,11 +348,9 @@ def batch_fit(frames: list[BatchFrame], *, gender: str = "auto", options: BatchO
     shape0 = np.mean([convert_shape(BodyModel.load(f.gender), f.shape, first) for f in frames], axis=0)
     if options.tail_reset:
         shape0[options.n_shape_free:] = 0.0
-    # the single fits' build under loose clothes is the clothes' (BatchOptions.start_build)
-    keep = options.start_build if options.start_build is not None else (0.0 if options.clothing == "loose" else 1.0)
-    if keep != 1.0:
+    if options.start_share != 1.0:  # the single fits' build under loose clothes is the clothes'
         sig = np.sqrt(np.asarray(first.eigenvalues, dtype=np.float64))
-        shape0 = shrink_build(shape0, sig, stature_direction(first, options.n_shape_free), keep)
+        shape0 = shrink_build(shape0, sig, stature_direction(first, options.n_shape_free), options.start_share)
     poses = np.array([f.pose for f in frames], dtype=np.float64)
     history: list = []
     shape, poses, batch = _alternate(runner, first, frames, shape0, poses, options, options.rounds,

@@ -376,6 +376,14 @@ class BatchOptions:
         return self.clothing == "loose" if self.reset_tail is None else bool(self.reset_tail)
 
     @property
+    def start_share(self) -> float:
+        """``start_build`` in force (given, or by default 0 under loose clothing: the mean build of
+        the single fits' stature; 1 under tight: their mean shape)."""
+        if self.start_build is not None:
+            return float(self.start_build)
+        return 0.0 if self.clothing == "loose" else 1.0
+
+    @property
     def cloth(self) -> tuple[float, float]:
         """(τ_c, λ_c) in force."""
         tau_c, weight = CLOTHING_PRESETS[self.clothing]
@@ -388,5 +396,5 @@ class BatchOptions:
         out["tau_cloth"], out["cloth_weight"] = self.cloth
         out["floor"] = self.stands
         out["pose_iterations"] = self.polish_iterations
-        out["build_weight"], out["reset_tail"] = self.build, self.tail_reset
+        out["build_weight"], out["reset_tail"], out["start_build"] = self.build, self.tail_reset, self.start_share
         return out

@@ -393,6 +393,9 @@ def test_loose_batch_starts_from_the_mean_build_of_the_single_fits_stature(frame
     start[0] = 2.5 * sigma[0]
     frame = replace(f, shape=start)
     opts = replace(BATCH, clothing="loose", rounds=0, final_evaluations=0, pose_iterations=0)
+    assert opts.start_share == 0.0 and replace(opts, clothing="tight").start_share == 1.0
+    assert replace(opts, start_build=0.25).start_share == 0.25 == replace(opts, start_build=0.25).to_dict()["start_build"]
+    assert opts.to_dict()["start_build"] == 0.0  # the share in force is written, not None
     g = stature_direction(model, opts.n_shape_free)
     loose = batch_fit([frame], gender="female", options=opts).shape
     assert build_prior(start, sigma, g) > 4.0

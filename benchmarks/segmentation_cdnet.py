@@ -137,10 +137,14 @@ def _angle(a, b) -> float:
     return float(np.degrees(np.arccos(np.clip(c, -1.0, 1.0))))
 
 
-def _load(root: Path, last: int):
-    frames = [cv2.cvtColor(cv2.imread(str(root / "input" / f"in{i:06d}.jpg")), cv2.COLOR_BGR2RGB)
-              for i in range(1, last + 1)]  # fmt: skip
-    return frames
+def _load(root: Path, last: int, first: int = 1) -> list:
+    """RGB frames ``first``..``last`` (1-based, both included) of ``root``'s ``input/``."""
+    return [cv2.cvtColor(cv2.imread(str(root / "input" / f"in{i:06d}.jpg")), cv2.COLOR_BGR2RGB)
+            for i in range(first, last + 1)]  # fmt: skip
+
+
+def _truths(root: Path, frames) -> dict:
+    return {i: cv2.imread(str(root / "groundtruth" / f"gt{i:06d}.png"), cv2.IMREAD_GRAYSCALE) for i in frames}
 
 
 def _run_adaptive(frames, settings, keep: set[int]):
@@ -263,11 +267,13 @@ def bench_cdnet(data: Path, quick: bool, unseen: Path | None = None) -> dict | N
     gt_frames = list(range(first_gt, LAST + 1, step))
     evaluate = [i for i in gt_frames if i >= SPLIT]
     tune = [i for i in gt_frames if i < SPLIT]
-    frames = _load(root, max(evaluate))
-    truths = {i: cv2.imread(str(root / "groundtruth" / f"gt{i:06d}.png"), cv2.IMREAD_GRAYSCALE) for i in gt_frames}
+    # with --cdnet-unseen: its frames past LAST appended, and every run below goes on through them
+    later = [i for i in range(first_gt, UNSEEN[1] + 1, step) if i >= UNSEEN[0]] if unseen is not None else []
+    frames = _load(root, LAST) + (_load(unseen, UNSEEN[1], LAST + 1) if later else [])
+    truths = _truths(root, gt_frames) | (_truths(unseen, later) if later else {})
     gts = [truths[i] for i in evaluate]
-    keep = set(evaluate)
-    rows, speed, cv_rows = {}, {}, {}
+    keep = set(evaluate) | set(later)
+    rows, speed, cv_rows, outs = {}, {}, {}, {}
 
     # toolkit, adaptive: both protocols from one set of grids
     t0, c0 = time.perf_counter(), time.process_time()
@@ -280,6 +286,7 @@ def bench_cdnet(data: Path, quick: bool, unseen: Path | None = None) -> dict | N
         if pick is None:
             continue
         out, fps = _run_adaptive(frames, pick[0], keep)  # the fixed split's picks run through apply itself
+        outs[name] = out
         real = np.stack([cdnet_counts(out[i], truths[i], roi) for i in evaluate])
         mismatch[name] = int(np.abs(real - proto["counts"]["fixed"][point][ev_rows]).sum())
         rows[name] = scores_from_counts(real)
@@ -294,25 +301,27 @@ def bench_cdnet(data: Path, quick: bool, unseen: Path | None = None) -> dict | N
     # OpenCV peers
     for name, make in PEERS.items():
         out, fps = _run_opencv(frames, make, keep)
+        outs[name] = out
         shadow = None if name in ("OpenCV GSOC", "OpenCV CNT") else SHADOW
         rows[name] = cdnet_scores([out[i] for i in evaluate], gts, roi, shadow=shadow)
         rows[name]["folds"] = [cdnet_scores([out[i] for i in fold], [truths[i] for i in fold], roi, shadow=shadow)
                                for fold in proto["folds"]]  # fmt: skip
         speed[name] = fps
-    res = _report(proto, rows, cv_rows, speed, mismatch, fixed_best, tune, evaluate, grid_wall, grid_cpu)
-    if unseen is not None:
-        res["unseen"] = bench_unseen(unseen, root, proto, fixed_model, quick)
+    res = _report(proto, rows, cv_rows, speed, mismatch, fixed_best, tune, evaluate, grid_wall, grid_cpu, max(keep))
+    if later:
+        res["unseen"] = bench_unseen(frames, truths, roi, list(range(first_gt, later[-1] + 1, step)), later, outs,
+                                     fixed_model, speed, str(unseen))  # fmt: skip
     else:
         print(f"   unseen frames {UNSEEN[0]}–{UNSEEN[1]}: not scored (--cdnet-unseen DIR, the full sequence: "
               "see benchmarks/segmentation_cdnet.py)")
     return res
 
 
-def _report(proto, rows, cv_rows, speed, mismatch, fixed_best, tune, evaluate, grid_wall, grid_cpu) -> dict:
+def _report(proto, rows, cv_rows, speed, mismatch, fixed_best, tune, evaluate, grid_wall, grid_cpu, last) -> dict:
     print(f"\n== 2. CDnet 2014 highway (real, single view 320×240): fixed split tuned on {len(tune)} GT frames "
           f"{tune[0]}–{tune[-1]}, blocked {len(proto['folds'])}-fold CV over {len(evaluate)} frames "
           f"{evaluate[0]}–{evaluate[-1]} (blocks of {BLOCK}, gap {GAP}); adaptive grids {grid_cpu:.0f} s CPU / "
-          f"{grid_wall:.0f} s wall; every method run over frames 1–{evaluate[-1]} in this run")  # fmt: skip
+          f"{grid_wall:.0f} s wall; every method run over frames 1–{last} in this run")  # fmt: skip
     _print_rows({**rows, **{f"{n} [CV]": m for n, m in cv_rows.items()}}, speed)
     gsoc = rows["OpenCV GSOC"]
     verdict = {}
@@ -357,11 +366,11 @@ def _report(proto, rows, cv_rows, speed, mismatch, fixed_best, tune, evaluate, g
             "cache_mismatch": mismatch, "target": verdict, "grid_cpu_s": grid_cpu, "grid_wall_s": grid_wall}  # fmt: skip
 
 
-def _same_sequence(full: Path, shared: Path, last_gt: int) -> None:
-    """Raise unless ``full`` holds the shared copy's frames 1–``LAST`` and truth from ``last_gt`` on,
+def _same_sequence(full: Path, shared: Path, first_gt: int) -> None:
+    """Raise unless ``full`` holds the shared copy's frames 1–``LAST`` and truth from ``first_gt`` on,
     byte for byte (the picks are chosen on them and the models run from frame 1)."""
     names = [f"input/in{i:06d}.jpg" for i in range(1, LAST + 1)]
-    names += [f"groundtruth/gt{i:06d}.png" for i in range(last_gt, LAST + 1)] + ["ROI.bmp"]
+    names += [f"groundtruth/gt{i:06d}.png" for i in range(first_gt, LAST + 1)] + ["ROI.bmp"]
     for name in names:
         a, b = full / name, shared / name
         if not a.is_file():
@@ -409,48 +418,47 @@ def _print_rows(rows: dict, speed: dict) -> None:
               f"{_fmt(m['fpr_shadow']):>7} {_fmt(m['shadow_precision']):>7} {_fmt(m['shadow_recall']):>7} {fps}")  # fmt: skip
 
 
-def bench_unseen(full: Path, shared: Path, proto: dict, fixed_model, quick: bool) -> dict:
-    """Frames ``UNSEEN`` (past the shared copy's end) under two protocols, each scored once.
+def bench_unseen(frames: list, truths: dict, roi, gt_frames: list[int], scored: list[int], outs: dict,
+                 fixed_model, speed: dict, source: str) -> dict:
+    """Frames ``UNSEEN`` (past the shared copy's end; ``scored``) under two protocols, each scored once.
 
-    * **picks from 470–699**: the fixed split's settings (``proto``), the OpenCV peers at their
-      defaults and the fixed eq. 5.5 model, run over frames 1–1700 and scored on 1201–1700 — nothing
-      was ever chosen on, or looked at in, these frames before this was computed;
+    * **picks from 470–699**: the fixed split's picks, the OpenCV peers at their defaults and the
+      fixed eq. 5.5 model — ``outs`` (labels by method name) and ``speed`` of :func:`bench_cdnet`'s
+      runs, which went on through these frames — nothing was ever chosen on, or looked at in,
+      these frames before this was computed;
     * **extended split**: the same protocol (:func:`adaptive_protocol`, pick rule, grids) with every
       labelled frame of the shared copy (470–1200: 24 times the fixed split's shadow pixels) as the
-      tuning set and 1201–1700 as the evaluation frames, fixed and blocked cross-validated — the
+      tuning set and ``scored`` as the evaluation frames, fixed and blocked cross-validated — the
       evidence the fixed split lacks (its 96 shadow frames hold almost none of the geometry's loss).
 
-    ``full`` checked against the shared copy by :func:`bench_cdnet` first (:func:`_same_sequence`).
-    Every 4th frame with ``--quick``."""
-    roi = cv2.imread(str(full / "ROI.bmp"), cv2.IMREAD_GRAYSCALE) > 0
-    first_gt = int((shared / "temporalROI.txt").read_text().split()[0])
-    gt_frames = list(range(first_gt, UNSEEN[1] + 1, 4 if quick else 1))
-    scored = [i for i in gt_frames if i >= UNSEEN[0]]
-    frames = _load(full, UNSEEN[1])
-    truths = {i: cv2.imread(str(full / "groundtruth" / f"gt{i:06d}.png"), cv2.IMREAD_GRAYSCALE) for i in gt_frames}
+    ``frames`` 1..``scored[-1]``, ``truths`` over ``gt_frames`` (470..``scored[-1]``), both checked
+    against the shared copy first (:func:`_same_sequence`)."""
     gts, keep = [truths[i] for i in scored], set(scored)
     t0, c0 = time.perf_counter(), time.process_time()
     extended = adaptive_protocol(frames, truths, roi, gt_frames, scored)
     grid_wall, grid_cpu = time.perf_counter() - t0, time.process_time() - c0
-    rows, speed = {}, {}
-    for tag, picks_of in (("picks from 470–699", proto["picks"]["fixed"]),
-                          ("extended split", extended["picks"]["fixed"])):  # fmt: skip
-        for point, name in POINTS.items():
-            if picks_of[point] is not None:
-                out, speed[f"{name}, {tag}"] = _run_adaptive(frames, picks_of[point][0], keep)
-                rows[f"{name}, {tag}"] = scores_from_counts(
-                    np.stack([cdnet_counts(out[i], truths[i], roi) for i in scored]))
+    first_gt = gt_frames[0]
+    rows, speed = {}, dict(speed)
+    for name in [n for n in POINTS.values() if n in outs]:
+        rows[f"{name}, picks from 470–699"] = scores_from_counts(
+            np.stack([cdnet_counts(outs[name][i], truths[i], roi) for i in scored]))
+        speed[f"{name}, picks from 470–699"] = speed[name]
+    for point, name in POINTS.items():
+        pick = extended["picks"]["fixed"][point]
+        if pick is not None:
+            out, speed[f"{name}, extended split"] = _run_adaptive(frames, pick[0], keep)
+            rows[f"{name}, extended split"] = scores_from_counts(
+                np.stack([cdnet_counts(out[i], truths[i], roi) for i in scored]))
     cv_rows = {f"{POINTS[p]}, extended [CV]": sc for p, sc in cv_scores(extended, gt_frames).items()}
     t0 = time.perf_counter()
     out = {i: fixed_model.classify(frames[i - 1]) for i in scored}
     speed["toolkit fixed (eq. 5.5)"] = len(scored) / (time.perf_counter() - t0)
     rows["toolkit fixed (eq. 5.5)"] = cdnet_scores([out[i] for i in scored], gts, roi)
-    for name, make in PEERS.items():
-        out, speed[name] = _run_opencv(frames, make, keep)
+    for name in PEERS:
         shadow = None if name in ("OpenCV GSOC", "OpenCV CNT") else SHADOW
-        rows[name] = cdnet_scores([out[i] for i in scored], gts, roi, shadow=shadow)
-        rows[name]["folds"] = [cdnet_scores([out[i] for i in fold], [truths[i] for i in fold], roi, shadow=shadow)
-                               for fold in extended["folds"]]  # fmt: skip
+        rows[name] = cdnet_scores([outs[name][i] for i in scored], gts, roi, shadow=shadow)
+        rows[name]["folds"] = [cdnet_scores([outs[name][i] for i in fold], [truths[i] for i in fold], roi,
+                                            shadow=shadow) for fold in extended["folds"]]  # fmt: skip
     shadow_px = int(sum(np.count_nonzero((truths[i] == 50) & roi) for i in scored))
     shadow_frames = sum(bool(np.any((truths[i] == 50) & roi)) for i in scored)
     print(f"\n== 2b. CDnet 2014 highway, unseen frames {scored[0]}–{scored[-1]} ({len(scored)} frames, "
@@ -466,7 +474,8 @@ def bench_unseen(full: Path, shared: Path, proto: dict, fixed_model, quick: bool
             print(f"   extended split, {point}: value_ratio {s.value_ratio} chroma {s.chroma} fraction "
                   f"{s.shadow_fraction if s.shadow_direction else '—'} (tuning F {pick[1]:.3f}, FPR-S {pick[2]:.3f})")
     return {"frames": [scored[0], scored[-1], len(scored)], "shadow_pixels": shadow_px, "shadow_frames": shadow_frames,
-            "source": str(full), "methods": rows, "cross_validation": cv_rows, "frames_per_second": speed,
+            "source": source, "methods": rows, "cross_validation": cv_rows,
+            "frames_per_second": {k: v for k, v in speed.items() if k in rows},
             "target": verdict, "extended_tuning_shadow_pixels": extended["shadow_pixels"],
             "extended_picks": _picks_dict(extended),
             "grid_cpu_s": grid_cpu, "grid_wall_s": grid_wall}

@@ -421,15 +421,13 @@ def table(args) -> int:
             "joint_median_mm", "precision", "recall", "area_ratio", "time_s", "ok_share", "ok_clean_share")
     short = ("n", "surf med", "surf p90", "surf max", "stat med", "joint med", "prec", "rec", "area", "s/frame", "ok",
              "ok clean")
+    fmt = {"frames": "9.0f"} | dict.fromkeys(("precision", "recall", "area_ratio", "ok_share", "ok_clean_share"), "9.3f")
     for variant, summary in results.items():
         codes = sorted({str(r.get("code", "not recorded")) for r in rows[variant]})
         print(f"\n== variant {variant} (fitting code {', '.join(codes)})")
         print(f"{'family':15s} " + " ".join(f"{c:>9s}" for c in short))
         for fam, r in summary.items():
-            print(f"{fam:15s} " + " ".join(f"{r[c]:9.0f}" if c == "frames" else f"{r[c]:9.3f}"
-                                           if c in ("precision", "recall", "area_ratio", "ok_share", "ok_clean_share")
-                                           else f"{r[c]:9.1f}"
-                                           for c in cols))
+            print(f"{fam:15s} " + " ".join(f"{r[c]:{fmt.get(c, '9.1f')}}" for c in cols))
     anchors = {"surface_median_mm": "≤ 8 per family", "surface_worst_mm": "≤ 15 per family",
                "stature_error_median_mm": "|.| ≤ 10 standing families", "precision": "≥ 0.97",
                "recall": "≥ 0.97", "ok_clean_share": "≥ 0.95 of clean frames", "time_s": "≤ 15 s per frame on 2 cores"}

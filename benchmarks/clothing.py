@@ -10,8 +10,8 @@ silhouettes (``studio fit``'s single-frame fit, gender auto on the first frame),
 (``studio.fit.batch_session.fit_batch_session``: clothing cost of the condition, gender by batch)
 over the frames the quality gates pass; single-pose figures are over the same frames.
 
-Per subject × condition (cached as JSON with the fitting code's digest: a rerun does what is missing or was
-done by other fitting code):
+Per subject × condition (cached as JSON with the digests of the fitting and the segmentation code: a rerun does
+what is missing or was done by other code or on other masks):
 
 - stature, chest, waist and hip girth errors of the batch shape and of each single-pose fit
   against the true body measured by the same definitions, and the mean surface distance of the
@@ -257,11 +257,13 @@ def run_one(p: dict, condition: str, workers: int) -> dict:
 def run(args) -> int:
     from rigs.atomic import atomic_write_json
     from studio.fit.units import fit_code_digest
+    from studio.segment.session import segmentation_code_digest
 
     root = bench_root()
     results = root / "results"
     results.mkdir(parents=True, exist_ok=True)
     code = fit_code_digest()
+    seg = segmentation_code_digest()
     people = subjects(args.subjects, args.poses, args.quick)
     for p in [people[i] for i in args.only] if args.only else people:
         if not (root / p["name"] / "body.npz").is_file():
@@ -272,17 +274,17 @@ def run(args) -> int:
             return 1
         for cond in args.conditions:
             path = results / f"{p['name']}_{cond}.json"
-            if path.is_file() and json.loads(path.read_text()).get("code") == code:
+            if path.is_file() and _same_code(json.loads(path.read_text()), code, seg):
                 keep_in_ledger(path)
-                continue  # done by this fitting code (results of other code are redone, as its fits are)
-            kept = ledger_result(path.name, code)
+                continue  # done by this code (results of other code or masks are redone, as its fits are)
+            kept = ledger_result(path.name, code, seg)
             if kept is not None:  # done on an earlier machine by this fitting code
                 atomic_write_json(path, kept)
                 continue
             t = time.perf_counter()
             r = run_one(p, cond, args.workers)
             r["time_total_s"] = time.perf_counter() - t
-            r["code"] = code
+            r["code"], r["segmentation"] = code, seg
             atomic_write_json(path, r)
             keep_in_ledger(path)
             print(f"{p['name']} {cond}: done in {r['time_total_s']:.0f} s", flush=True)
@@ -300,14 +302,20 @@ def keep_in_ledger(path: Path) -> None:
         atomic_write_bytes(kept, data, mkdir=True)
 
 
-def ledger_result(name: str, code: str) -> dict | None:
+def _same_code(result: dict, code: str, seg: str) -> bool:
+    """Whether ``result`` was written by fitting code ``code`` on masks of segmentation code ``seg``
+    (results from before the segmentation's digest was recorded count as other masks)."""
+    return result.get("code") == code and result.get("segmentation") == seg
+
+
+def ledger_result(name: str, code: str, seg: str) -> dict | None:
     """Result ``name`` from the repository's ledger when ``--ledger`` is on and it was written by
-    fitting code ``code``, else None."""
+    fitting code ``code`` on masks of segmentation code ``seg``, else None."""
     path = LEDGER / RUN["name"] / name
     if not RUN["ledger"] or not path.is_file():
         return None
     r = json.loads(path.read_text())
-    return r if r.get("code") == code else None
+    return r if _same_code(r, code, seg) else None
 
 
 def coverage(args) -> int:
@@ -449,7 +457,7 @@ def table(args) -> int:
         print("no results yet: run `build` then `run`")
         return 1
     summary = summarise(rows)
-    codes = Counter(str(r.get("code", "not recorded")) for r in rows)
+    codes = Counter(f"{r.get('code', 'not recorded')} on masks of {r.get('segmentation', 'not recorded')}" for r in rows)
     print("fitting code: " + ", ".join(f"{c} ({n} results)" for c, n in codes.most_common())
           + ("  — MIXED: the results are not one code's; `run` redoes the others" if len(codes) > 1 else ""))
     for cond, s in summary.items():

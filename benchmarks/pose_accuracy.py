@@ -67,8 +67,9 @@ Splits (``--split``): ``held-out`` (the default, seeds from 1000, only ever meas
 reported) and ``dev`` (other people, seeds from 100, in their own folder: the set any setting is
 tuned on). Nothing is ever tuned on the held-out split.
 
-Steps (resumable: every fitted frame is cached as JSON with the fitting code's digest, a rerun fits only
-what is missing, and refuses to add frames to a variant fitted by other code — a variant holds one code's figures):
+Steps (resumable: every fitted frame is cached as JSON with the digests of the fitting and the segmentation code
+(the latter recorded from issue 13's ``person-mask`` on), a rerun fits only what is missing, and refuses to add frames
+to a variant fitted by other code or on other masks — a variant holds one code's figures):
 
     /path/to/python-with-anny benchmarks/pose_accuracy.py build --people 30   # torch + anny
     .venv/bin/python benchmarks/pose_accuracy.py run --variant full --workers 2 [--threads 1]
@@ -165,7 +166,11 @@ VARIANTS = {"full": {}, "no-library": {"start": "stride"}, "no-rival": {"rival_h
             "dev-tail20": {}, "dev-tail100": {},
             # ... a third joint per triangle in the model's pose deformation (not landed: git branch
             # experiment/third-joint, its model rebuilt by `studio model build` there; dev only)
-            "dev-ext3": {}}
+            "dev-ext3": {},
+            # issue 13: the held-out people on the studio's person masks (STUDIO_MORPHOLOGY: 3 px median, no opening;
+            # the fingers kept), the same fitting code as bridges; on dev the masks equal those of the harness variant
+            # dev-seg-m3o0 (stop 53, outside the repository)
+            "person-mask": {}}
 STANDING = ("a_pose", "t_pose", "arms_overhead", "hands_on_hips", "arm_forward", "arms_crossed", "wide_stance",
             "torso_twist")
 
@@ -287,8 +292,9 @@ def run(args) -> int:
     """Fit every frame of the split not cached yet; a person's frames are fitted while the next
     person is rendered."""
     from rigs.atomic import atomic_write_json, atomic_write_text
-    from studio.segment import segment_session
     from studio.fit.units import frame_fit_code_digest
+    from studio.segment import segment_session
+    from studio.segment.session import segmentation_code_digest
     from studio.simulate import ensure_rendered
     from studio.threads import set_threads
     from studio.workers import worker_pool
@@ -301,17 +307,19 @@ def run(args) -> int:
         if not (root / p["name"] / "body.npz").is_file():
             print(f"{p['name']}: no truth body — run `build` first with torch + anny", file=sys.stderr)
             return 1
-    code = frame_fit_code_digest()
-    other = sorted({str(r.get("code")) for r in _rows(args.variant, args.split)} - {code})
+    code, seg = frame_fit_code_digest(), segmentation_code_digest()
+    other = sorted({f"{r.get('code')} on masks of {r.get('segmentation')}" for r in _rows(args.variant, args.split)}
+                   - {f"{code} on masks of {seg}"})
     if other and any(not (out / f"{p['name']}_{f}.json").is_file() for p in everyone for f in range(len(p["poses"]))
                      if not args.families or p["poses"][f] in args.families):
-        print(f"variant {args.variant}: its frames were fitted by other fitting code (digest {', '.join(other)}; "
-              f"this code {code}): a variant holds one code's figures — give a new --variant name", file=sys.stderr)
+        print(f"variant {args.variant}: its frames were fitted by other code (fit digest {', '.join(other)}; this "
+              f"code {code} on masks of {seg}): a variant holds one code's figures — give a new --variant name",
+              file=sys.stderr)
         return 1
     t0, n = time.perf_counter(), 0
 
     def save(fut):
-        r = {**fut.result(), "code": code, "threads": args.threads}
+        r = {**fut.result(), "code": code, "segmentation": seg, "threads": args.threads}
         atomic_write_json(out / f"{r['person']}_{r['frame']}.json", r)
         print(f"{r['person']} frame {r['frame']} ({r['family']}): {r.get('surface_mm', float('nan')):.1f} mm, "
               f"{r['status']}, {time.perf_counter() - t0:.0f} s", flush=True)
@@ -424,7 +432,8 @@ def table(args) -> int:
     fmt = {"frames": "9.0f"} | dict.fromkeys(("precision", "recall", "area_ratio", "ok_share", "ok_clean_share"), "9.3f")
     for variant, summary in results.items():
         codes = sorted({str(r.get("code", "not recorded")) for r in rows[variant]})
-        print(f"\n== variant {variant} (fitting code {', '.join(codes)})")
+        segs = sorted({str(r.get("segmentation", "not recorded")) for r in rows[variant]})
+        print(f"\n== variant {variant} (fitting code {', '.join(codes)}; segmentation code {', '.join(segs)})")
         print(f"{'family':15s} " + " ".join(f"{c:>9s}" for c in short))
         for fam, r in summary.items():
             print(f"{fam:15s} " + " ".join(f"{r[c]:{fmt.get(c, '9.1f')}}" for c in cols))

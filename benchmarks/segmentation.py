@@ -53,6 +53,7 @@ from rigs.atomic import atomic_write_text  # noqa: E402
 from studio.segment import (  # noqa: E402
     PERSON,
     SHADOW,
+    STUDIO_MORPHOLOGY,
     BackgroundModel,
     ShadowVoter,
     SkinClassifier,
@@ -100,7 +101,7 @@ def bench_simulated(session_path: Path | None, quick: bool) -> dict:
 
     calib = RigCalibration.load(session.calibration_path)
     cams = session.cameras
-    models = {c: BackgroundModel.fit(session.backgrounds(c)) for c in cams}
+    models = {c: BackgroundModel.fit(session.backgrounds(c), morphology=STUDIO_MORPHOLOGY) for c in cams}
     voter = ShadowVoter(calib, cams)
     frames = session.frame_indices[: (4 if quick else 20)]
     lay = Layout(session.path)
@@ -278,7 +279,7 @@ def bench_speed(quick: bool, workers: int) -> dict:
     scene = SyntheticScene.build(4, (656, 490), torso_color=(82, 74, 52))
     backgrounds = scene.backgrounds(4)
     frame, _, _ = scene.render(seed=5)
-    models = {c: BackgroundModel.fit(backgrounds[c]) for c in backgrounds}
+    models = {c: BackgroundModel.fit(backgrounds[c], morphology=STUDIO_MORPHOLOGY) for c in backgrounds}
     voter = ShadowVoter(scene.calibration)
     n = 10 if quick else 30
 

@@ -69,11 +69,11 @@ def _make(method: str, background: list[np.ndarray]):
 def voting_inputs(size: tuple[int, int], n: int = 5):
     """A :class:`ShadowVoter` of the synthetic 4-camera rig at ``size`` and ``n`` analysed multi-frames
     ``[(labels, ratios), ...]`` (the fixed model + morphology, as ``studio segment`` votes them)."""
-    from studio.segment import BackgroundModel, ShadowVoter
+    from studio.segment import STUDIO_MORPHOLOGY, BackgroundModel, ShadowVoter
     from studio.segment.synthetic import SyntheticScene
 
     scene = SyntheticScene.build(4, size, torso_color=(82, 74, 52))
-    models = {c: BackgroundModel.fit(b) for c, b in scene.backgrounds(8).items()}
+    models = {c: BackgroundModel.fit(b, morphology=STUDIO_MORPHOLOGY) for c, b in scene.backgrounds(8).items()}
     inputs = []
     for s in range(n):
         analysed = {c: models[c].analyse(img) for c, img in scene.render(seed=s)[0].items()}

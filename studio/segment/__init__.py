@@ -10,7 +10,7 @@ from studio.segment.classify import BACKGROUND, PERSON, SHADOW, Thresholds, clas
 from studio.segment.errors import SegmentationError
 from studio.segment.hsv import circular_mean, circular_std, hue_distance, rgb_to_hsv
 from studio.segment.metrics import binary_scores, tune_thresholds
-from studio.segment.morphology import Morphology, clean_labels, fill_holes, remove_small_components
+from studio.segment.morphology import STUDIO_MORPHOLOGY, Morphology, clean_labels, fill_holes, remove_small_components
 from studio.segment.self_shadow import StreamFrame, StreamShadows, learn_stream_shadows, stream_frame
 from studio.segment.session import SegmentOptions, SegmentationSummary, segment_session
 from studio.segment.shadow_geometry import learn_shadow_direction, shadow_geometry
@@ -26,6 +26,7 @@ __all__ = [
     "BackgroundModel",
     "FloorVotes",
     "Morphology",
+    "STUDIO_MORPHOLOGY",
     "SegmentOptions",
     "SegmentationError",
     "SegmentationSummary",

@@ -14,8 +14,8 @@ import numpy as np
 from studio.segment.classify import PERSON, SHADOW
 from studio.segment.errors import SegmentationError
 
-__all__ = ["Morphology", "binary_median", "clean_labels", "remove_small_components", "fill_holes", "disk",
-           "person_components"]
+__all__ = ["Morphology", "STUDIO_MORPHOLOGY", "binary_median", "clean_labels", "remove_small_components",
+           "fill_holes", "disk", "person_components"]
 
 
 @dataclass(frozen=True)
@@ -48,6 +48,14 @@ class Morphology:
         """``(min_area, max_hole, max_person_hole)`` in pixels for an image of ``shape`` (H, W)."""
         area = shape[0] * shape[1]
         return tuple(int(round(f * area)) for f in (self.min_area, self.max_hole, self.max_person_hole))
+
+
+#: The clean-up of a studio session's labels (``studio segment``, issue 13): a 3 px median and no
+#: opening keep the fingers the defaults' 5 px median and 1 px opening round off (64 dev frames of
+#: generated people: the hands' recall 0.940 → 0.986, the person masks' precision / recall against the
+#: truth 0.979 / 0.994 → 0.983 / 0.998). The defaults stay those of video without an empty scene
+#: (the adaptive model on CDnet, whose precision the 3 px median costs: label-free F 0.973 → 0.960).
+STUDIO_MORPHOLOGY = Morphology(median=3, open_radius=0)
 
 
 def disk(radius: int) -> np.ndarray:

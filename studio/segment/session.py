@@ -43,7 +43,7 @@ import numpy as np
 from studio.segment.background import BackgroundModel
 from studio.segment.classify import PERSON, SHADOW, Thresholds
 from studio.segment.errors import SegmentationError
-from studio.segment.morphology import Morphology, person_components
+from studio.segment.morphology import STUDIO_MORPHOLOGY, Morphology, person_components
 from studio.segment.preparation import background_model, floor_grid, registered, registration_shifts
 from studio.segment.skin import SkinClassifier
 from studio.segment.static import StaticChanges, absolute_spec, ignore_masks
@@ -76,7 +76,7 @@ class SegmentOptions:
     """Settings of :func:`segment_session` (None: keep the stored/default value)."""
 
     thresholds: Thresholds | None = None
-    morphology: Morphology | None = None
+    morphology: Morphology | None = None  # None: STUDIO_MORPHOLOGY (a stored model's own is replaced)
     refit_background: bool = False
     voting: bool = True
     skin: bool = True
@@ -369,6 +369,7 @@ def segment_session(
 
     t0 = time.perf_counter()
     ws = _open(source, out)
+    options = replace(options, morphology=options.morphology or STUDIO_MORPHOLOGY)
     cameras = ws.camera_names
     bad = sorted(SEGMENTATION_RESERVED & set(cameras))
     if bad:

@@ -51,3 +51,39 @@ def test_binary_median_by_hand():
     assert binary_median(mask, 3).sum() == 9 - 4  # the 3×3 median erodes the block's corners
     mask[0, :] = 1  # an edge row: replicated, as medianBlur does
     np.testing.assert_array_equal(binary_median(mask, 3), cv2.medianBlur(mask, 3))
+
+
+
+def _hand(width: int, gap: int, noise: bool = False) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Labels of a palm (disc of radius 14 px) with four fingers ``width`` px wide, ``gap`` px apart and 16 px
+    above the palm; the masks of those fingers' part above the palm and of the gaps between them."""
+    labels = np.zeros((80, 80), np.uint8)
+    cv2.circle(labels, (40, 50), 14, int(PERSON), -1)
+    fingers = np.zeros((80, 80), bool)
+    for k in range(4):
+        fingers[18:37, 30 + k * (width + gap) : 30 + k * (width + gap) + width] = True
+    labels[fingers] = PERSON
+    above = np.zeros_like(fingers)
+    above[18:34, 30 : 30 + 4 * width + 3 * gap] = True
+    if noise:  # isolated pixels of sensor noise away from the hand
+        rng = np.random.default_rng(0)
+        labels[rng.integers(0, 12, 30), rng.integers(0, 80, 30)] = PERSON
+    return labels, fingers & above, above & ~fingers
+
+
+def test_studio_morphology_keeps_the_fingers_the_default_rounds_off():
+    from studio.segment import STUDIO_MORPHOLOGY
+
+    def person(labels, m):
+        return clean_labels(labels, m) == PERSON
+
+    labels, fingers, _ = _hand(width=2, gap=3)  # fingers of a person ~3 m from a 656×490 camera
+    assert not (person(labels, Morphology()) & fingers).any()  # the 5 px median erases them
+    assert (person(labels, STUDIO_MORPHOLOGY) & fingers).sum() / fingers.sum() > 0.9
+    labels, fingers, gaps = _hand(width=3, gap=2)
+    assert (person(labels, Morphology()) & gaps).sum() / gaps.sum() > 0.8  # ... or fills the gaps between them
+    assert not (person(labels, STUDIO_MORPHOLOGY) & gaps).any()
+    assert (person(labels, STUDIO_MORPHOLOGY) & fingers).sum() / fingers.sum() > 0.9
+    noisy, _, _ = _hand(width=2, gap=3, noise=True)
+    for m in (Morphology(), STUDIO_MORPHOLOGY):  # isolated noise goes either way
+        assert not person(noisy, m)[:12].any()

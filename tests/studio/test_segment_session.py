@@ -47,6 +47,11 @@ def test_segment_session_writes_labels_skin_overlays(fresh):
     assert (fresh / "segmentation" / "floor_votes" / "000000.png").is_file()
     meta = json.loads((fresh / "segmentation" / "segmentation.json").read_text())
     assert meta["format"] == "studio.segmentation" and meta["frames"] == [0, 1, 2]
+    # the studio's clean-up (fingers kept), in the settings and in the saved background model
+    studio = {"median": 3, "open_radius": 0, "close_radius": 2}
+    assert {k: meta["settings"]["morphology"][k] for k in studio} == studio
+    stored = json.loads((fresh / "segmentation" / "background" / "cam0" / "model.json").read_text())["morphology"]
+    assert {k: stored[k] for k in studio} == studio
     # the background model is computed once, then reused
     model_json = fresh / "segmentation" / "background" / "cam0" / "model.json"
     stamp = model_json.stat().st_mtime_ns

@@ -278,7 +278,7 @@ def run(args) -> int:
                 keep_in_ledger(path)
                 continue  # done by this code (results of other code or masks are redone, as its fits are)
             kept = ledger_result(path.name, code, seg)
-            if kept is not None:  # done on an earlier machine by this fitting code
+            if kept is not None:  # done on an earlier machine by this code on these masks
                 atomic_write_json(path, kept)
                 continue
             t = time.perf_counter()
@@ -457,8 +457,8 @@ def table(args) -> int:
         print("no results yet: run `build` then `run`")
         return 1
     summary = summarise(rows)
-    codes = Counter(f"{r.get('code', 'not recorded')} on masks of {r.get('segmentation', 'not recorded')}" for r in rows)
-    print("fitting code: " + ", ".join(f"{c} ({n} results)" for c, n in codes.most_common())
+    codes = Counter(f"{r.get('code', 'not recorded')} / {r.get('segmentation', 'not recorded')}" for r in rows)
+    print("fitting / segmentation code: " + ", ".join(f"{c} ({n} results)" for c, n in codes.most_common())
           + ("  — MIXED: the results are not one code's; `run` redoes the others" if len(codes) > 1 else ""))
     for cond, s in summary.items():
         print(f"\n== {cond} clothing: {s['subjects']} subjects, {s['frames']} frames")

@@ -308,13 +308,12 @@ def run(args) -> int:
             print(f"{p['name']}: no truth body — run `build` first with torch + anny", file=sys.stderr)
             return 1
     code, seg = frame_fit_code_digest(), segmentation_code_digest()
-    other = sorted({f"{r.get('code')} on masks of {r.get('segmentation')}" for r in _rows(args.variant, args.split)}
-                   - {f"{code} on masks of {seg}"})
+    other = {(r.get("code"), r.get("segmentation")) for r in _rows(args.variant, args.split)} - {(code, seg)}
     if other and any(not (out / f"{p['name']}_{f}.json").is_file() for p in everyone for f in range(len(p["poses"]))
                      if not args.families or p["poses"][f] in args.families):
-        print(f"variant {args.variant}: its frames were fitted by other code (fit digest {', '.join(other)}; this "
-              f"code {code} on masks of {seg}): a variant holds one code's figures — give a new --variant name",
-              file=sys.stderr)
+        print(f"variant {args.variant}: its frames were fitted by other code or on other masks (fit / segmentation "
+              f"digests {', '.join(f'{c} / {m}' for c, m in sorted(other, key=str))}; this code {code} / {seg}): a "
+              f"variant holds one code's figures — give a new --variant name", file=sys.stderr)
         return 1
     t0, n = time.perf_counter(), 0
 

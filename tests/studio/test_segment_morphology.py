@@ -53,7 +53,6 @@ def test_binary_median_by_hand():
     np.testing.assert_array_equal(binary_median(mask, 3), cv2.medianBlur(mask, 3))
 
 
-
 def _hand(width: int, gap: int, noise: bool = False) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Labels of a palm (disc of radius 14 px) with four fingers ``width`` px wide, ``gap`` px apart and 16 px
     above the palm; the masks of those fingers' part above the palm and of the gaps between them."""

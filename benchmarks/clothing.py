@@ -20,6 +20,7 @@ what is missing or was done by other code or on other masks):
   the spread across subjects;
 - gender: single pose (neutral body of the frame's fit, then female and male shape steps with the
   pose fixed, §6.4.5), vote (majority of the single poses, ties to the summed margin), batch;
+  how many batches the paired test over the frames calls uncertain, and how many of those are wrong;
 - skin: precision / recall against the simulator's true skin pixels of the segmentation's
   self-trained classifier (fig. 6.3 box) and of the session-adapted one (fitted hands and face);
   on the real SFA / abdomen masks via ``benchmarks/segmentation.py``'s skin section.
@@ -212,7 +213,8 @@ def run_one(p: dict, condition: str, workers: int) -> dict:
     out = {"subject": p["name"], "condition": condition, "sex": truth["sex"], "garment": p["garment"] if
            condition == "loose" else ["shirt", "trousers"], "poses": p["poses"], "frames": batch["frames"],
            "batch": {"gender": batch["gender"], "gender_costs": batch["gender_costs"],
-                     "gender_terms": batch.get("gender_terms"), "clothing_auto": batch.get("clothing_auto"),
+                     "gender_terms": batch.get("gender_terms"), "gender_test": batch.get("gender_test"),
+                     "quality": batch.get("quality"), "clothing_auto": batch.get("clothing_auto"),
                      "margin": batch["gender_margin"], "errors_mm": {k: 1000 * (bm[k] - true_m[k]) for k in MEASURES},
                      "consistency": batch["consistency"], "timings": batch["timings"]},
            "single": {}, "time_segment_s": t_seg, "time_batch_s": batch["wall_time"],
@@ -432,6 +434,14 @@ def summarise(rows: list[dict]) -> dict:
         if all(t for t, _ in terms):
             s["gender_pct"]["batch_cost_only"] = 100 * float(np.mean(
                 [min(t, key=lambda g, t=t: t[g]["cost"]) == sex for t, sex in terms]))
+        # the paired test over the frames (gender_test): batches whose gender it calls uncertain
+        tests = [(r["batch"].get("gender_test"), r["batch"]["gender"] == r["sex"]) for r in rs]
+        if all(t for t, _ in tests):
+            flagged = [ok for t, ok in tests if t["uncertain"]]
+            sure = [ok for t, ok in tests if not t["uncertain"]]
+            s["gender_uncertain"] = {"flagged": len(flagged), "wrong_flagged": flagged.count(False),
+                                     "right_flagged": flagged.count(True), "sure": len(sure),
+                                     "wrong_sure": sure.count(False)}
         s["flagged"] = sum(bool(r["batch"]["consistency"]["flagged"]) for r in rs)
         s["skin"] = {k: {m: float(np.mean([r["skin"][k][m] for r in rs])) for m in ("precision", "recall")}
                      for k in ("segmentation", "session")}
@@ -480,6 +490,10 @@ def table(args) -> int:
         print(f"gender accuracy single / vote / batch: {g['single']:.0f} / {g['vote']:.0f} / {g['batch']:.0f} % "
               f"(thesis {THESIS_GENDER['single']} / {THESIS_GENDER['vote']} / {THESIS_GENDER['batch']} %)"
               + (f"; batch by the cost alone {g['batch_cost_only']:.0f} %" if "batch_cost_only" in g else ""))
+        if (u := s.get("gender_uncertain")) is not None:
+            print(f"gender flagged uncertain (95 % paired interval reaches 0): {u['flagged']} of {s['subjects']} "
+                  f"({u['wrong_flagged']} wrong, {u['right_flagged']} right); not flagged: {u['sure']}, "
+                  f"{u['wrong_sure']} wrong")
         sk = s["skin"]
         print(f"skin P/R: segmentation (self-trained box) {sk['segmentation']['precision']:.2f}/"
               f"{sk['segmentation']['recall']:.2f}, session-adapted {sk['session']['precision']:.2f}/"

@@ -20,6 +20,9 @@ is refined by one more round. The score is the batch cost (eq. 6.7) per frame pl
 stature among that sex in ANSUR II (:func:`gender_scores`). The weight is 0, the thesis' rule
 (the lower cost wins): from the mean build of its stature the loose cost separates the sexes,
 and a stature prior calls tall women male (the constant says how it was chosen).
+Whether the frames agree is tested too (:func:`~studio.fit.batch_gender.gender_test`: a paired
+t interval over the per-frame cost differences of the two fits); a margin within that noise is
+``uncertain``, and ``fit/batch.json``'s quality and ``studio report`` say so.
 
 **Consistency** (§6.4.2: shape varies little with pose, much across people): the frames' own
 single-frame bodies and the batch body are scored by the same cost; when the shared shape
@@ -38,7 +41,7 @@ import numpy as np
 from studio.body import BodyModel
 from studio.body.skeleton import POSE_SIZE
 from studio.cost import shape_prior
-from studio.fit.batch_gender import gender_scores
+from studio.fit.batch_gender import gender_scores, gender_test
 from studio.fit.batch_terms import (KNEE_INDICES, BatchOptions, ClothedObjective, build_prior,
                                     clothing_residuals, clothing_targets, on_floor, shrink_build,
                                     stature_direction)
@@ -238,7 +241,8 @@ def _alternate(runner, model, frames, shape, poses, options, rounds, n_free, his
 class BatchResult:
     """The batch fit: ``gender`` (chosen or given) with ``gender_costs`` (the decision's scores:
     :func:`gender_scores`), ``gender_terms`` (cost, Mahalanobis distance and score per gender) and
-    ``margin`` (loser − winner score; all None when the gender was given), the shared ``shape``, per-frame ``poses``
+    ``margin`` (loser − winner score) with ``gender_test`` (:func:`gender_test`: is the margin above
+    the frames' spread; all None when the gender was given), the shared ``shape``, per-frame ``poses``
     (P, POSE_SIZE) and ``costs`` (P,) at the final level, ``total`` (eq. 6.7), ``consistency``."""
 
     gender: str
@@ -254,6 +258,7 @@ class BatchResult:
     options: dict
     timings: dict = field(default_factory=dict)
     gender_terms: dict | None = None
+    gender_test: dict | None = None
 
     def to_json(self) -> dict:
         return {
@@ -263,6 +268,7 @@ class BatchResult:
             "gender_costs": self.gender_costs,
             "gender_margin": self.margin,
             "gender_terms": self.gender_terms,
+            "gender_test": self.gender_test,
             "shape": [float(v) for v in self.shape],
             "frames": [int(f) for f in self.frames],
             "poses": {str(f): [float(v) for v in p] for f, p in zip(self.frames, self.poses, strict=True)},
@@ -317,16 +323,17 @@ def compare_genders(frames: list[BatchFrame], source: BodyModel, shape: np.ndarr
                     options: BatchOptions) -> dict:
     """§6.4.5: with the poses fixed, the first ``gender_shape_free`` coefficients of the female
     and of the male model, started from ``source``'s body ``shape``, by a shape step each;
-    {gender: (model, shape, batch cost, start)} with ``start`` the source body in that model's
-    coefficients; :func:`gender_scores` decides. With one frame this is the thesis' single-pose
-    gender classification."""
+    {gender: (model, shape, batch cost, start, per-frame costs (P,))} with ``start`` the source
+    body in that model's coefficients; :func:`gender_scores` decides, :func:`gender_test` says
+    whether the frames agree. With one frame this is the thesis' single-pose gender
+    classification."""
     out = {}
     for g in ("female", "male"):
         m = BodyModel.load(g)
         start = convert_shape(source, shape, m)
-        s, c = _Batch(m, frames, options).shape_step(start, poses, options.gender_shape_free,
-                                                    options.shape_evaluations)
-        out[g] = (m, s, c, start)
+        batch = _Batch(m, frames, options)
+        s, c = batch.shape_step(start, poses, options.gender_shape_free, options.shape_evaluations)
+        out[g] = (m, s, c, start, batch.per_frame(s, poses, options.levels[0]))
     return out
 
 
@@ -355,7 +362,7 @@ def batch_fit(frames: list[BatchFrame], *, gender: str = "auto", options: BatchO
     history: list = []
     shape, poses, batch = _alternate(runner, first, frames, shape0, poses, options, options.rounds,
                                      options.n_shape_free, history, first.gender)
-    gender_costs, gender_terms, margin, model = None, None, None, first
+    gender_costs, gender_terms, margin, test, model = None, None, None, None, first
     timings = {"first_model": round(time.perf_counter() - t0, 3)}
     if gender == "auto":
         t = time.perf_counter()
@@ -368,6 +375,7 @@ def batch_fit(frames: list[BatchFrame], *, gender: str = "auto", options: BatchO
         gender_costs = {g: v["score"] for g, v in gender_terms.items()}
         win = min(gender_costs, key=gender_costs.get)
         margin = float(max(gender_costs.values()) - gender_costs[win])
+        test = gender_test({g: c[4] for g, c in cands.items()}, gender_costs)
         model, shape = cands[win][:2]
         timings["gender"] = round(time.perf_counter() - t, 3)
         t = time.perf_counter()
@@ -401,4 +409,5 @@ def batch_fit(frames: list[BatchFrame], *, gender: str = "auto", options: BatchO
     timings["total"] = round(time.perf_counter() - t0, 3)
     return BatchResult(gender=model.gender, shape=shape, frames=[f.frame for f in frames], poses=poses, costs=costs,
                        total=total, gender_costs=gender_costs, margin=margin, consistency=cons, history=history,
-                       options=options.to_dict(), timings=timings, gender_terms=gender_terms)
+                       options=options.to_dict(), timings=timings, gender_terms=gender_terms,
+                       gender_test=test)

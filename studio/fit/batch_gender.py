@@ -4,7 +4,8 @@
 fixed; :func:`gender_scores` turns their costs into the decision: the batch cost (eq. 6.7) per
 frame plus :data:`GENDER_PRIOR_WEIGHT` (0 by default: the thesis' rule) × the stature evidence
 (:func:`stature_evidence`, ANSUR II), with the stature evidence and the Mahalanobis distances of
-the shapes in each gender's PCA reported beside.
+the shapes in each gender's PCA reported beside; :func:`gender_test` says whether the decision
+rises above the batch's own noise (a paired test over its frames).
 """
 
 from __future__ import annotations
@@ -14,7 +15,7 @@ import numpy as np
 from studio.cost import shape_prior
 from studio.fit.errors import FitError
 
-__all__ = ["GENDER_PRIOR_WEIGHT", "gender_scores", "stature_evidence"]
+__all__ = ["GENDER_CONFIDENCE", "GENDER_PRIOR_WEIGHT", "gender_scores", "gender_test", "stature_evidence"]
 
 #: Weight of the stature evidence against the batch cost per frame in the gender decision
 #: (:func:`gender_scores`); 0: the thesis' rule (§6.4.5), the lower batch cost wins, the stature
@@ -27,6 +28,11 @@ __all__ = ["GENDER_PRIOR_WEIGHT", "gender_scores", "stature_evidence"]
 #: alone and by weights up to 0.01, 12 at 0.02, 11 at 0.05 and at 0.1, 9 at 0.2: under the mean-build
 #: start the loose cost separates the sexes and the stature only trades tall women for short men.
 GENDER_PRIOR_WEIGHT = 0.0
+
+#: Two-sided confidence of :func:`gender_test`'s interval on the mean per-frame margin: the
+#: decision is ``uncertain`` when that interval reaches zero (the conventional 95 %, not chosen on
+#: any benchmark).
+GENDER_CONFIDENCE = 0.95
 
 
 def _mahalanobis(model, shape: np.ndarray, k: int) -> float:
@@ -63,9 +69,36 @@ def gender_scores(candidates: dict, stature: float, n_coefficients: int, weight:
     if isinstance(n_frames, bool) or int(n_frames) != n_frames or n_frames < 1:
         raise FitError(f"gender decision: expected a batch of at least 1 frame, got {n_frames!r}")
     out = {}
-    for g, (model, shape, cost, start) in candidates.items():
+    for g, (model, shape, cost, start, *_) in candidates.items():
         e = stature_evidence(stature, g)
         out[g] = {"cost": float(cost), "stature": e, "mahalanobis": _mahalanobis(model, start, n_coefficients),
                   "mahalanobis_fit": _mahalanobis(model, shape, n_coefficients),
                   "score": float(cost) / n_frames + weight * e}
     return out
+
+
+def gender_test(per_frame: dict, scores: dict, confidence: float = GENDER_CONFIDENCE) -> dict | None:
+    """Is the gender decision of a batch above its own noise? A paired test over its frames.
+
+    ``per_frame``: ``{gender: (P,)}`` each frame's clothing cost under that gender's fit (poses
+    shared, :func:`studio.fit.batch.compare_genders`); ``scores``: ``{gender: score}``
+    (:func:`gender_scores`). The margin (loser − winner score) is the mean over the frames of
+    d_p = cost_loser,p − cost_winner,p plus the per-batch terms (shape prior / P, stature
+    evidence); its ``confidence`` interval is margin ± t_{P−1} · sd(d) / √P (Student's t, the
+    frames as the sample). ``uncertain`` when the interval's lower end is ≤ 0: some frames favour
+    the other sex about as much as the rest favour the winner, so the batch cannot tell. None for
+    fewer than two frames (no spread to test against)."""
+    from scipy.stats import t as student
+
+    win = min(scores, key=scores.get)
+    lose = max(scores, key=scores.get)
+    raw = np.asarray(per_frame[lose], dtype=np.float64) - np.asarray(per_frame[win], dtype=np.float64)
+    if raw.ndim != 1 or len(raw) < 2 or win == lose:
+        return None
+    margin = float(scores[lose] - scores[win])
+    d = raw + (margin - raw.mean())  # the per-batch terms shared equally by the frames
+    se = float(d.std(ddof=1) / np.sqrt(len(d)))
+    half = float(student.ppf(0.5 + confidence / 2, len(d) - 1) * se)
+    return {"winner": win, "margin": margin, "per_frame": [round(float(v), 6) for v in d],
+            "frames_for_winner": int((d > 0).sum()), "se": se, "confidence": confidence,
+            "interval": [margin - half, margin + half], "uncertain": bool(margin - half <= 0.0)}

@@ -14,7 +14,8 @@
    refits with the tight cost — and keeps the loose batch when that refit's body is implausible
    where the loose one is not (:func:`implausible_tight`: the clothes were not tight).
 5. ``fit/batch.json`` (format ``studio.fit-batch`` v1) and ``fit/batch_neutral.ply`` (the batch
-   body in the model's default pose), written atomically.
+   body in the model's default pose), written atomically; its ``quality`` (:func:`batch_quality`)
+   is ``suspect`` when the frames may not show one person or the gender is within the frames' noise.
 """
 
 from __future__ import annotations
@@ -30,8 +31,8 @@ from studio.fit.batch_frames import choose_frames
 from studio.fit.errors import FitError
 from studio.fit.frame import FitOptions
 
-__all__ = ["TIGHT_RECALL", "clothing_from_coverage", "fit_batch_session", "implausible_tight", "load_batch",
-           "run_batch_command", "session_skin"]
+__all__ = ["TIGHT_RECALL", "batch_quality", "clothing_from_coverage", "fit_batch_session", "gender_warning",
+           "implausible_tight", "load_batch", "run_batch_command", "session_skin"]
 
 log = logging.getLogger(__name__)
 
@@ -202,7 +203,8 @@ def fit_batch_session(
                         kind, decided["tight_refused"] = "loose", why
                     else:
                         result = replace(tight, gender_costs=result.gender_costs, gender_terms=result.gender_terms,
-                                         margin=result.margin, history=result.history + tight.history)
+                                         margin=result.margin, gender_test=result.gender_test,
+                                         history=result.history + tight.history)
                 decided["chosen"] = kind
             where = runner.where
     except ExecutionError as exc:
@@ -223,9 +225,31 @@ def fit_batch_session(
         "executor": where,
         "wall_time": round(time.perf_counter() - t0, 3),
     })
+    obj["quality"] = batch_quality(obj)
     model.save_mesh(ws.layout.fit_batch_mesh, model.vertices(result.shape))
     atomic_write_json(ws.layout.fit_batch, obj)
     return obj
+
+
+def gender_warning(test: dict | None) -> str | None:
+    """The reason a batch's gender is uncertain (:func:`~studio.fit.batch_gender.gender_test`), or None."""
+    if not test or not test.get("uncertain"):
+        return None
+    lo, hi = test["interval"]
+    n = len(test["per_frame"])
+    return (f"gender uncertain: {test['winner']} by {test['margin']:.3f} per frame, "
+            f"{test['confidence'] * 100:.0f} % interval {lo:+.3f} … {hi:+.3f} reaches 0 "
+            f"({test['frames_for_winner']} of {n} frames favour {test['winner']})")
+
+
+def batch_quality(obj: dict) -> dict:
+    """``{"status": "ok" | "suspect", "reasons": [...]}`` of a ``fit/batch.json`` object: suspect
+    when the consistency check flags the frames as more than one person (§6.4.2) or the gender
+    decision is within the frames' own noise (:func:`gender_warning`)."""
+    reasons = list((obj.get("consistency") or {}).get("reasons", []))
+    if (why := gender_warning(obj.get("gender_test"))) is not None:
+        reasons.append(why)
+    return {"status": "suspect" if reasons else "ok", "reasons": reasons}
 
 
 def load_batch(source) -> dict | None:
@@ -277,4 +301,6 @@ def run_batch_command(args, ws, frames, options: FitOptions) -> int:
     cons = obj["consistency"]
     if cons["flagged"]:
         print("WARNING: the frames may not show one person: " + "; ".join(cons["reasons"]))
+    if (why := gender_warning(obj.get("gender_test"))) is not None:
+        print(f"WARNING: {why}; give --gender if it is known")
     return 0

@@ -88,7 +88,7 @@ def gather(source, participant: Participant | None = None, *, posterior: bool = 
     from studio.body.iso7250 import measure_iso
     from studio.body.measure import t_pose
     from studio.fit import load_fits, load_quality
-    from studio.fit.batch_session import load_batch
+    from studio.fit.batch_session import gender_warning, load_batch
     from studio.report.measurements import frames_used, load_truth, measurement_table, use_batch_shape
     from studio.report.uncertainty import load_model_error, session_uncertainty
     from studio.workspace import Layout, Workspace
@@ -125,7 +125,8 @@ def gather(source, participant: Participant | None = None, *, posterior: bool = 
         sex = participant.sex or (gender if gender in ("female", "male") else "neutral")
         table = use_batch_shape(table, model, shape, load_truth(lay), sex=sex, frames=batch["frames"],
                                 clothing=batch.get("clothing"),
-                                poses=[batch["poses"][str(f)] for f in batch["frames"]])
+                                poses=[batch["poses"][str(f)] for f in batch["frames"]],
+                                warning=gender_warning(batch.get("gender_test")))
     rest = model.vertices(shape)
     measured = measure_iso(rest, model.vertices(shape, t_pose(model, shape)), model.joint_regressor @ rest,
                            model.faces, model.parts, model.face_parts)

@@ -229,6 +229,8 @@ Method: Bălan, Detailed Human Shape and Pose from Images (annealed particle fil
 
 def _batch_html(batch: dict | None) -> str:
     """The paragraph saying the measurements rest on the batch shape (thesis ch. 6), or nothing."""
+    from studio.fit.batch_session import gender_warning
+
     if batch is None:
         return ""
     margin = ("" if batch.get("gender_margin") is None else
@@ -236,6 +238,8 @@ def _batch_html(batch: dict | None) -> str:
     cons = batch.get("consistency") or {}
     warn = (f" <b>Flagged: the frames may not show one person ({_esc('; '.join(cons.get('reasons', [])))}).</b>"
             if cons.get("flagged") else "")
+    if (why := gender_warning(batch.get("gender_test"))) is not None:
+        warn += f" <b>Flagged: {_esc(why)}; every figure is of the {_esc(batch['gender'])} model's body.</b>"
     return (f"<p class=batch>Measured on the <b>batch shape</b>: one body shape shared by frames "
             f"{_esc(batch['frames'])} with one pose each (thesis ch. 6, eq. 6.5–6.9), {_esc(batch['gender'])} model"
             f"{_esc(margin)}, {_esc(batch.get('clothing', ''))} clothing cost. The per-frame values and the spread are "

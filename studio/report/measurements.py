@@ -239,7 +239,8 @@ def loose_flag(name: str) -> str | None:
 
 
 def use_batch_shape(table: dict, model, shape, truth: dict | None = None, sex: str | None = None,
-                    frames: list | None = None, clothing: str | None = None, poses=None) -> dict:
+                    frames: list | None = None, clothing: str | None = None, poses=None,
+                    warning: str | None = None) -> dict:
     """The table measured on the batch shape (thesis ch. 6: one shape shared by the frames,
     ``fit/batch.json``) instead of the mean of the single-frame shapes: each row's ``mean`` is the
     batch body's value (``model`` the batch's gender), its interval moved with it, the truth error
@@ -250,7 +251,9 @@ def use_batch_shape(table: dict, model, shape, truth: dict | None = None, sex: s
     the shoulder breadth keeps its status. The stature of a loose batch with its ``poses`` (P,
     POSE_SIZE; the frames' order) is :func:`standing_height` instead (``method`` says so), which
     keeps its status — unless it lies more than :data:`STANDING_GAP` below the rest body's (no
-    frame stood). Returns a new table."""
+    frame stood). A batch-wide ``warning`` (:func:`studio.fit.batch_session.gender_warning`: the
+    gender is within the frames' noise, and every value is of that gender's body) flags every row
+    and makes it at least ``suspect``. Returns a new table."""
     from studio.body import measure
     from studio.report.population import population_context
 
@@ -286,6 +289,9 @@ def use_batch_shape(table: dict, model, shape, truth: dict | None = None, sex: s
             row["method"] = standing
         elif clothing == "loose" and (flag := loose_flag(name)) is not None:
             row["flags"] = [*row.get("flags", []), flag]
+            row["status"] = "failed" if row.get("status") == "failed" else "suspect"
+        if warning:
+            row["flags"] = [*row.get("flags", []), warning]
             row["status"] = "failed" if row.get("status") == "failed" else "suspect"
         out[name] = row
     return out

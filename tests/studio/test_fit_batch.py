@@ -9,7 +9,8 @@ from studio.fit import FitOptions, fit_frame
 from studio.fit.frame import build_targets
 from studio.fit.batch import BatchFrame, BatchOptions, batch_fit, convert_shape, on_floor
 from studio.fit.batch_frames import choose_frames
-from studio.fit.batch_gender import GENDER_PRIOR_WEIGHT, gender_scores, stature_evidence
+from studio.fit.batch_gender import GENDER_PRIOR_WEIGHT, gender_scores, gender_test, stature_evidence
+from studio.fit.batch_session import batch_quality, gender_warning
 from studio.fit.errors import FitError
 from studio.fit.init import standing_pose
 from studio.render import silhouette
@@ -140,6 +141,12 @@ def test_gender_by_batch_reports_both_costs_and_the_margin(frames):
         assert terms[g]["score"] == pytest.approx(terms[g]["cost"] / 2 + GENDER_PRIOR_WEIGHT * terms[g]["stature"])
         assert terms[g]["score"] == res.gender_costs[g]
     assert res.to_json()["gender_terms"] == terms
+    # the paired test over the two frames: its per-frame margins average to the decision's margin
+    test = res.to_json()["gender_test"]
+    assert test["winner"] == res.gender and len(test["per_frame"]) == 2
+    assert np.mean(test["per_frame"]) == pytest.approx(res.margin, abs=1e-5) and test["margin"] == res.margin
+    lo, hi = test["interval"]
+    assert lo < res.margin < hi and test["uncertain"] is (lo <= 0)
     # the default rule is the thesis' (§6.4.5): the lower batch cost wins, the stature evidence only reported
     assert GENDER_PRIOR_WEIGHT == 0.0 and res.gender == min(terms, key=lambda g: terms[g]["cost"])
 
@@ -194,6 +201,43 @@ def test_gender_decision_adds_the_stature_evidence():
     many = gender_scores(eleven, 1.86, 3, weight=0.1, n_frames=11)
     for g in terms:
         assert many[g]["score"] == pytest.approx(terms[g]["score"]) and many[g]["cost"] == pytest.approx(11 * terms[g]["cost"])
+
+
+def test_gender_test_is_a_paired_t_interval_over_the_frames():
+    """Per-frame costs of the two gender fits (poses shared): the margin is the mean of the
+    per-frame differences plus the per-batch terms; its 95 % interval is Student's t over the
+    frames (scipy's paired test gives the same t). Frames that all favour one sex make a sure
+    decision; frames split both ways around a small lead make it uncertain."""
+    from scipy.stats import ttest_rel
+
+    female = np.array([3.0, 2.8, 3.1, 2.9, 3.05])
+    male = female + np.array([0.04, 0.05, 0.03, 0.06, 0.04])  # every frame favours the female fit
+    scores = {"female": female.mean(), "male": male.mean() + 0.01}  # + a shape prior difference / P
+    t = gender_test({"female": female, "male": male}, scores)
+    assert t["winner"] == "female" and t["margin"] == pytest.approx(0.054)
+    d = np.array(t["per_frame"])
+    assert d == pytest.approx(male - female + 0.01) and d.mean() == pytest.approx(t["margin"])
+    assert t["se"] == pytest.approx(np.std(male - female, ddof=1) / np.sqrt(5))
+    # t_{0.975, 4} = 2.776
+    assert t["interval"] == pytest.approx([0.054 - 2.776 * t["se"], 0.054 + 2.776 * t["se"]], abs=1e-4)
+    assert t["uncertain"] is False and t["frames_for_winner"] == 5 and gender_warning(t) is None
+    assert ttest_rel(male + 0.01, female).statistic == pytest.approx(t["margin"] / t["se"])
+    # the same lead with frames split both ways: the interval reaches 0
+    split = female + np.array([0.30, -0.25, 0.28, -0.22, 0.09])
+    u = gender_test({"female": female, "male": split}, {"female": female.mean(), "male": split.mean()})
+    assert u["winner"] == "female" and u["margin"] == pytest.approx(0.04) and u["uncertain"] is True
+    assert u["interval"][0] < 0 < u["interval"][1] and u["frames_for_winner"] == 3
+    why = gender_warning(u)
+    assert why.startswith("gender uncertain: female by 0.040 per frame, 95 % interval -") and "3 of 5 frames" in why
+    # a male winner: the differences are female − male
+    m = gender_test({"female": male, "male": female}, {"female": male.mean(), "male": female.mean()})
+    assert m["winner"] == "male" and np.array(m["per_frame"]) == pytest.approx(male - female)
+    assert gender_test({"female": female[:1], "male": male[:1]}, {"female": 3.0, "male": 3.04}) is None
+    # fit/batch.json's quality: suspect with each reason, ok without
+    assert batch_quality({"consistency": {"reasons": []}, "gender_test": t}) == {"status": "ok", "reasons": []}
+    q = batch_quality({"consistency": {"reasons": ["frame 3: two people"]}, "gender_test": u})
+    assert q == {"status": "suspect", "reasons": ["frame 3: two people", why]}
+    assert batch_quality({"consistency": None, "gender_test": None}) == {"status": "ok", "reasons": []}
 
 
 def test_shapes_convert_between_gender_models():

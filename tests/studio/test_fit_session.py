@@ -258,6 +258,19 @@ def test_cli_batch_writes_batch_json_mesh_and_the_report_uses_it(tmp_path, capsy
     table = json.loads((tmp_path / "s" / "report" / "measurements.json").read_text())
     assert table["measurements"]["stature"]["shape_source"] == "batch"
     assert table["measurements"]["stature"]["mean"] == pytest.approx(1000 * obj["measurements"]["stature"], abs=1.0)
+    # the gender was given: no test; quality from the consistency check alone
+    assert obj["gender_test"] is None
+    assert obj["quality"]["reasons"] == obj["consistency"]["reasons"]
+    assert obj["quality"]["status"] == ("suspect" if obj["consistency"]["flagged"] else "ok")
+    # a batch whose gender the frames cannot tell (gender_test uncertain): the report flags every figure
+    obj["gender_test"] = {"winner": "female", "margin": 0.003, "per_frame": [0.05, -0.044], "frames_for_winner": 1,
+                          "se": 0.047, "confidence": 0.95, "interval": [-0.594, 0.600], "uncertain": True}
+    (tmp_path / "s" / "fit" / "batch.json").write_text(json.dumps(obj))
+    assert main(["report", str(tmp_path / "s")]) == 0
+    html = (tmp_path / "s" / "report" / "index.html").read_text()
+    assert "Flagged: gender uncertain: female by 0.003 per frame, 95 % interval -0.594 … +0.600 reaches 0" in html
+    rows = json.loads((tmp_path / "s" / "report" / "measurements.json").read_text())["measurements"]
+    assert all(r["status"] in ("suspect", "failed") and r["flags"][-1].startswith("gender uncertain") for r in rows.values())
     assert main(["fit", str(tmp_path / "s"), "--batch", "--batch-frames", "1"]) == 1
     assert "--batch-frames must be >= 2" in capsys.readouterr().err
     assert main(["fit", str(tmp_path / "s"), "--batch", "--shadows"]) == 1

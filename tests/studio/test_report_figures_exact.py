@@ -264,6 +264,20 @@ def test_loose_batch_figures_are_flagged():
     assert use_batch_shape(failed, MODEL, [4.0], clothing="loose")["mass"]["status"] == "failed"
 
 
+def test_uncertain_gender_flags_every_batch_figure():
+    """A batch whose gender is within its frames' noise: every figure is of that gender's body, so
+    every row carries the warning after its own flags and is at least suspect; failed stays failed."""
+    table = measurement_table(MODEL, {0: fit(0.0), 1: fit(2.0)})
+    failed = {**table, "mass": {**table["mass"], "status": "failed", "flags": ["failed: +5.0 σ"]}}
+    out = use_batch_shape(failed, MODEL, [4.0], clothing="loose", warning="gender uncertain: x")
+    assert all(r["flags"][-1] == "gender uncertain: x" for r in out.values())
+    assert {n for n, r in out.items() if r["status"] == "suspect"} == set(out) - {"mass"}
+    assert out["mass"]["status"] == "failed" and out["mass"]["flags"] == ["failed: +5.0 σ", LOOSE_FLAGS["bounded"],
+                                                                          "gender uncertain: x"]
+    assert out["biacromial_breadth"]["flags"] == ["gender uncertain: x"]
+    assert all(r["flags"] == [] for r in use_batch_shape(table, MODEL, [4.0], warning=None).values())
+
+
 # --------------------------------------------------------------------------- files
 HEADER = ["name", "unit", "mean", "std", "status", "flags", "truth", "error", "truth_anny", "error_anny", "clause",
           "sigma", "ci95_low", "ci95_high", "iso20685_max_error", "iso20685_ok", "percentile", "z"]

@@ -238,6 +238,12 @@ def loose_flag(name: str) -> str | None:
     return LOOSE_FLAGS["joints"] if kind in LOOSE_JOINT_KINDS else None
 
 
+def _flag(row: dict, flag: str) -> None:
+    """Append ``flag`` to a table row's flags and make it at least ``suspect`` (failed stays failed)."""
+    row["flags"] = [*row.get("flags", []), flag]
+    row["status"] = "failed" if row.get("status") == "failed" else "suspect"
+
+
 def use_batch_shape(table: dict, model, shape, truth: dict | None = None, sex: str | None = None,
                     frames: list | None = None, clothing: str | None = None, poses=None,
                     warning: str | None = None) -> dict:
@@ -288,11 +294,9 @@ def use_batch_shape(table: dict, model, shape, truth: dict | None = None, sex: s
         if name == "stature" and standing is not None:
             row["method"] = standing
         elif clothing == "loose" and (flag := loose_flag(name)) is not None:
-            row["flags"] = [*row.get("flags", []), flag]
-            row["status"] = "failed" if row.get("status") == "failed" else "suspect"
+            _flag(row, flag)
         if warning:
-            row["flags"] = [*row.get("flags", []), warning]
-            row["status"] = "failed" if row.get("status") == "failed" else "suspect"
+            _flag(row, warning)
         out[name] = row
     return out
 

@@ -12,10 +12,13 @@ on the shared coefficients with every pose held), starting from the single-frame
 tight clothing every pose is polished by least squares at full resolution at the end, as the
 single fits are.
 
-**Gender by batch** (§6.4.5): the neutral model is fitted first (poses and shape alternate);
-then, poses fixed, the first ``gender_shape_free`` coefficients of the female and of the male
-model are re-estimated from the neutral body; the lower score wins (its margin is reported) and
-is refined by one more round. The score is the batch cost (eq. 6.7) per frame plus
+**Gender by batch** (§6.4.5), by ``BatchOptions.gender_step``: ``"neutral"`` (the thesis' step,
+the default under loose clothing) fits the neutral model first (poses and shape alternate), then,
+poses fixed, re-estimates the first ``gender_shape_free`` coefficients of the female and of the
+male model from the neutral body; the lower score wins and is refined by one more round.
+``"full"`` (the default under tight clothing) fits a complete batch of each gender from the
+single fits and the lower final total wins. Either way the margin is reported. The score is the
+batch cost (eq. 6.7) per frame plus
 :data:`~studio.fit.batch_gender.GENDER_PRIOR_WEIGHT` × −2 log-likelihood of the neutral body's
 stature among that sex in ANSUR II (:func:`gender_scores`). The weight is 0, the thesis' rule
 (the lower cost wins): from the mean build of its stature the loose cost separates the sexes,
@@ -34,7 +37,8 @@ from __future__ import annotations
 
 import logging
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
+from typing import NamedTuple
 
 import numpy as np
 
@@ -51,7 +55,7 @@ from studio.fit.objective import parameter_box, pose_bounds
 from studio.optimize import Stage, staged_nelder_mead
 
 __all__ = ["BatchFrame", "BatchOptions", "BatchResult", "ClothedObjective", "batch_fit", "compare_genders",
-           "convert_shape", "consistency", "clothing_targets", "on_floor", "pose_polish", "pose_step"]
+           "convert_shape", "consistency", "start_shape", "clothing_targets", "on_floor", "pose_polish", "pose_step"]
 
 log = logging.getLogger(__name__)
 
@@ -319,49 +323,99 @@ def consistency(batch_model: BodyModel, shape: np.ndarray, poses: np.ndarray, fr
             "thresholds": {"cost_ratio": COST_RATIO_FLAG, "stature_spread_m": STATURE_SPREAD_FLAG}}
 
 
+class GenderFit(NamedTuple):
+    """One gender's fit in the gender decision: its ``model``, ``shape``, batch ``cost`` (eq.
+    6.7), ``start`` (the body it started from, in its coefficients) and each frame's cost
+    ``per_frame`` (P,)."""
+
+    model: BodyModel
+    shape: np.ndarray
+    cost: float
+    start: np.ndarray
+    per_frame: np.ndarray
+
+
 def compare_genders(frames: list[BatchFrame], source: BodyModel, shape: np.ndarray, poses: np.ndarray,
-                    options: BatchOptions) -> dict:
+                    options: BatchOptions) -> dict[str, GenderFit]:
     """§6.4.5: with the poses fixed, the first ``gender_shape_free`` coefficients of the female
-    and of the male model, started from ``source``'s body ``shape``, by a shape step each;
-    {gender: (model, shape, batch cost, start, per-frame costs (P,))} with ``start`` the source
-    body in that model's coefficients; :func:`gender_scores` decides, :func:`gender_test` says
-    whether the frames agree. With one frame this is the thesis' single-pose gender
-    classification."""
+    and of the male model, started from ``source``'s body ``shape``, by a shape step each (work
+    level); ``{gender: GenderFit}`` with ``start`` the source body in that model's coefficients.
+    :func:`gender_scores` decides, :func:`gender_test` says whether the frames agree. With one
+    frame this is the thesis' single-pose gender classification."""
     out = {}
     for g in ("female", "male"):
         m = BodyModel.load(g)
         start = convert_shape(source, shape, m)
         batch = _Batch(m, frames, options)
-        s, c = batch.shape_step(start, poses, options.gender_shape_free, options.shape_evaluations)
-        out[g] = (m, s, c, start, batch.per_frame(s, poses, options.levels[0]))
+        s, _ = batch.shape_step(start, poses, options.gender_shape_free, options.shape_evaluations)
+        per_frame = batch.per_frame(s, poses, options.levels[0])
+        out[g] = GenderFit(m, s, float(per_frame.sum() + batch.prior(s)), start, per_frame)
     return out
+
+
+def _decide(cands: dict[str, GenderFit], stature: float, n_coefficients: int, n_frames: int, history: list):
+    """The gender decision over ``cands``: (winner, scores, terms, margin, paired test)."""
+    terms = gender_scores(cands, stature, n_coefficients, n_frames=n_frames)
+    history += [{"model": g, "round": "gender", **v} for g, v in terms.items()]
+    scores = {g: v["score"] for g, v in terms.items()}
+    win = min(scores, key=scores.get)
+    margin = float(max(scores.values()) - scores[win])
+    return win, scores, terms, margin, gender_test({g: c.per_frame for g, c in cands.items()}, scores)
+
+
+def start_shape(frames: list[BatchFrame], model: BodyModel, options: BatchOptions) -> np.ndarray:
+    """The batch's starting shape in ``model``'s coefficients: the mean of the frames'
+    single-frame bodies (under loose clothing: its tail at the mean, ``reset_tail``, and its build
+    at the mean of its stature, ``start_build``)."""
+    shape0 = np.mean([convert_shape(BodyModel.load(f.gender), f.shape, model) for f in frames], axis=0)
+    if options.tail_reset:
+        shape0[options.n_shape_free:] = 0.0
+    if options.start_share != 1.0:  # the single fits' build under loose clothes is the clothes'
+        sig = np.sqrt(np.asarray(model.eigenvalues, dtype=np.float64))
+        shape0 = shrink_build(shape0, sig, stature_direction(model, options.n_shape_free), options.start_share)
+    return shape0
+
+
+def _full_genders(frames: list[BatchFrame], options: BatchOptions, runner) -> "BatchResult":
+    """Gender by two complete batches (``gender_step`` ``"full"``): the female and the male batch
+    each fitted from the single fits to the end (final level, polish), the lower total per frame
+    wins; the paired test over the frames' final costs."""
+    from studio.body import measure
+
+    t0 = time.perf_counter()
+    fits = {g: batch_fit(frames, gender=g, options=options, runner=runner) for g in ("female", "male")}
+    cands = {}
+    for g, r in fits.items():
+        m = BodyModel.load(g)
+        cands[g] = GenderFit(m, r.shape, r.total, start_shape(frames, m, options), r.costs)
+    stature = float(np.mean([measure(c.model, c.shape)["stature"] for c in cands.values()]))
+    history = fits["female"].history + fits["male"].history
+    win, scores, terms, margin, test = _decide(cands, stature, options.n_shape_free, len(frames), history)
+    timings = {g: r.timings["total"] for g, r in fits.items()} | {"total": round(time.perf_counter() - t0, 3)}
+    return replace(fits[win], gender_costs=scores, margin=margin, history=history, timings=timings,
+                   gender_terms=terms, gender_test=test)
 
 
 def batch_fit(frames: list[BatchFrame], *, gender: str = "auto", options: BatchOptions = BatchOptions(),
               runner=None) -> BatchResult:
-    """Fit one shape and P poses to the frames (eq. 6.5–6.9), gender by batch when ``"auto"``.
+    """Fit one shape and P poses to the frames (eq. 6.5–6.9), gender by batch when ``"auto"``
+    (``options.gender_fit``).
 
     ``runner`` (:func:`studio.execution.open_runner`) runs the per-frame pose steps side by side;
-    None runs them here. Starts from each frame's single-frame pose and the mean of the frames'
-    single-frame bodies expressed in the model's coefficients (under loose clothing: its tail
-    at the mean, ``reset_tail``, and its build at the mean of its stature, ``start_build``).
+    None runs them here. Starts from each frame's single-frame pose and :func:`start_shape`.
     """
     if not frames:
         raise FitError("batch fit: no frames")
     if gender not in ("auto", "female", "male", "neutral"):
         raise FitError(f"gender: expected auto, female, male or neutral, got {gender!r}")
+    if gender == "auto" and options.gender_fit == "full":
+        return _full_genders(frames, options, runner)
     t0 = time.perf_counter()
     first = BodyModel.load("neutral" if gender == "auto" else gender)
-    shape0 = np.mean([convert_shape(BodyModel.load(f.gender), f.shape, first) for f in frames], axis=0)
-    if options.tail_reset:
-        shape0[options.n_shape_free:] = 0.0
-    if options.start_share != 1.0:  # the single fits' build under loose clothes is the clothes'
-        sig = np.sqrt(np.asarray(first.eigenvalues, dtype=np.float64))
-        shape0 = shrink_build(shape0, sig, stature_direction(first, options.n_shape_free), options.start_share)
     poses = np.array([f.pose for f in frames], dtype=np.float64)
     history: list = []
-    shape, poses, batch = _alternate(runner, first, frames, shape0, poses, options, options.rounds,
-                                     options.n_shape_free, history, first.gender)
+    shape, poses, batch = _alternate(runner, first, frames, start_shape(frames, first, options), poses, options,
+                                     options.rounds, options.n_shape_free, history, first.gender)
     gender_costs, gender_terms, margin, test, model = None, None, None, None, first
     timings = {"first_model": round(time.perf_counter() - t0, 3)}
     if gender == "auto":
@@ -369,14 +423,9 @@ def batch_fit(frames: list[BatchFrame], *, gender: str = "auto", options: BatchO
         cands = compare_genders(frames, first, shape, poses, options)
         from studio.body import measure
 
-        gender_terms = gender_scores(cands, measure(first, shape)["stature"], options.gender_shape_free,
-                                     n_frames=len(frames))
-        history += [{"model": g, "round": "gender", **v} for g, v in gender_terms.items()]
-        gender_costs = {g: v["score"] for g, v in gender_terms.items()}
-        win = min(gender_costs, key=gender_costs.get)
-        margin = float(max(gender_costs.values()) - gender_costs[win])
-        test = gender_test({g: c[4] for g, c in cands.items()}, gender_costs)
-        model, shape = cands[win][:2]
+        win, gender_costs, gender_terms, margin, test = _decide(cands, measure(first, shape)["stature"],
+                                                                options.gender_shape_free, len(frames), history)
+        model, shape = cands[win].model, cands[win].shape
         timings["gender"] = round(time.perf_counter() - t, 3)
         t = time.perf_counter()
         shape, poses, batch = _alternate(runner, model, frames, shape, poses, options, 1, options.n_shape_free,

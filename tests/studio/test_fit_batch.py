@@ -126,10 +126,11 @@ def test_a_batch_mixing_two_people_is_flagged(frames):
 
 
 def test_gender_by_batch_reports_both_costs_and_the_margin(frames):
-    """A female body: both gender models are fitted with the poses fixed, the lower cost wins."""
+    """A female body: both gender models are fitted with the poses fixed (the thesis' step,
+    ``gender_step`` neutral), the lower cost wins."""
     model, fr = frames
     opts = BatchOptions(clothing="tight", levels=(2, 2), rounds=0, pose_evaluations=10, shape_evaluations=30,
-                        n_shape_free=3, gender_shape_free=3)
+                        n_shape_free=3, gender_shape_free=3, gender_step="neutral")
     res = batch_fit([fr["A0"][0], fr["A1"][0]], gender="auto", options=opts)
     assert set(res.gender_costs) == {"female", "male"}
     assert res.gender == min(res.gender_costs, key=res.gender_costs.get)
@@ -149,6 +150,32 @@ def test_gender_by_batch_reports_both_costs_and_the_margin(frames):
     assert lo < res.margin < hi and test["uncertain"] is (lo <= 0)
     # the default rule is the thesis' (§6.4.5): the lower batch cost wins, the stature evidence only reported
     assert GENDER_PRIOR_WEIGHT == 0.0 and res.gender == min(terms, key=lambda g: terms[g]["cost"])
+
+
+def test_gender_by_two_full_batches(frames):
+    """``gender_step`` full: a complete batch of each gender, the lower total per frame wins; the
+    result is the winner's own batch, both totals are its scores' costs, and the paired test runs
+    over the two batches' final per-frame costs. The default under tight clothing; loose keeps
+    the thesis' step."""
+    model, fr = frames
+    opts = BatchOptions(clothing="tight", levels=(2, 2), rounds=1, pose_evaluations=10, shape_evaluations=30,
+                        n_shape_free=3, gender_shape_free=3, pose_iterations=0, gender_step="full")
+    bf = [fr["A0"][0], fr["A1"][0]]
+    res = batch_fit(bf, gender="auto", options=opts)
+    own = {g: batch_fit(bf, gender=g, options=opts) for g in ("female", "male")}
+    for g in own:
+        assert res.gender_terms[g]["cost"] == pytest.approx(own[g].total, rel=1e-9)
+        assert res.gender_costs[g] == pytest.approx(own[g].total / 2)
+    assert res.gender == "female" and res.margin == pytest.approx(own["male"].total / 2 - own["female"].total / 2)
+    assert res.shape == pytest.approx(own["female"].shape) and res.total == pytest.approx(own["female"].total)
+    assert np.mean(res.gender_test["per_frame"]) == pytest.approx(res.margin, abs=1e-5)
+    assert res.gender_test["per_frame"][0] == pytest.approx(
+        own["male"].costs[0] - own["female"].costs[0] + res.margin - np.mean(own["male"].costs - own["female"].costs),
+        abs=1e-5)
+    assert res.to_json()["settings"]["gender_step"] == "full" and {"female", "male"} <= set(res.timings)
+    assert BatchOptions(clothing="tight").gender_fit == "full" and BatchOptions(clothing="loose").gender_fit == "neutral"
+    with pytest.raises(FitError, match="gender_step: expected one of neutral, full or None, got 'both'"):
+        BatchOptions(gender_step="both")
 
 
 class _Model:

@@ -379,7 +379,9 @@ def start_shape(frames: list[BatchFrame], model: BodyModel, options: BatchOption
 def _full_genders(frames: list[BatchFrame], options: BatchOptions, runner) -> "BatchResult":
     """Gender by two complete batches (``gender_step`` ``"full"``): the female and the male batch
     each fitted from the single fits to the end (final level, polish), the lower total per frame
-    wins; the paired test over the frames' final costs."""
+    wins; the paired test over the frames' final costs. The stature evidence (reported, weight 0)
+    is of the mean of the two bodies' statures (there is no neutral body here). Returns the
+    winner's batch with the decision's fields."""
     from studio.body import measure
 
     t0 = time.perf_counter()

@@ -316,17 +316,18 @@ class BatchOptions:
     |8.6| mm; gender by batch 19 → 18 of 20 (the cost alone: 20 of 20).
     ``gender_step``: how the gender is decided (:data:`GENDER_STEPS`); None: ``"full"`` under tight
     clothing, ``"neutral"`` (the thesis' step) under loose. Why: a tightly dressed woman of the
-    reported benchmark (subject 19, looked at to diagnose, not chosen on) was called male by the
-    thesis' step although her complete female batch cost 25 % less than her male one; the neutral
+    reported benchmark (subject 19: she prompted the change, so her call is no evidence for it) was
+    called male by the thesis' step although her complete female batch cost 25 % less; the neutral
     poses and 6 coefficients judge the female model in the neutral body's poses. On the dev split
     (21 people of seeds 3000–3027, 4 postures, the variants on the same cached single fits):
     tight, both rules called all 21 right (the paired t statistic of the margin 5.4–25.2 for the
     thesis' step, 5.7–23.7 for the full batches, higher on 11 of 21), the full batches' girths a
     little closer (11 people: stature / chest / waist / hip |err| 6.5 / 23.7 / 11.0 / 23.9 → 5.5 /
     22.6 / 8.7 / 24.5 mm); loose (10 people), the full batches called 3 of the 4 men female (the
-    smaller body stays inside loose clothes more cheaply: 7 of 10, the thesis' step 9 of 10). One alternation round per gender before the
-    thesis' comparison (poses refitted, 10 coefficients) was tried too: 18 of 20 against 19, a
-    loose miss no longer flagged uncertain, and every tight margin shifted towards male.
+    smaller body stays inside loose clothes more cheaply: 7 of 10, the thesis' step 9 of 10). One
+    alternation round per gender before the thesis' comparison (poses refitted, 10 coefficients)
+    was tried too: 18 of 20 against 19, a loose miss no longer flagged uncertain, and every tight
+    margin shifted towards male.
     """
 
     clothing: str = "loose"

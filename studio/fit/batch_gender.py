@@ -1,7 +1,7 @@
 """Gender by batch (thesis §6.4.5): the decision between the female and the male fits.
 
-:func:`studio.fit.batch.compare_genders` fits both gender models to a batch (each its own
-alternation round, or the thesis' step: poses fixed); :func:`gender_scores` turns their costs
+:func:`studio.fit.batch.compare_genders` (the thesis' step: poses fixed) or two complete batches
+(``BatchOptions.gender_step`` ``"full"``) fit both gender models; :func:`gender_scores` turns their costs
 into the decision: the batch cost (eq. 6.7) per frame plus :data:`GENDER_PRIOR_WEIGHT` (0 by
 default: the thesis' rule) × the stature evidence (:func:`stature_evidence`, ANSUR II), with
 the stature evidence and the Mahalanobis distances of the shapes in each gender's PCA reported
@@ -82,8 +82,8 @@ def gender_test(per_frame: dict, scores: dict, confidence: float = GENDER_CONFID
     """Is the gender decision of a batch above its own noise? A paired test over its frames.
 
     ``per_frame``: ``{gender: (P,)}`` each frame's clothing cost under that gender's fit
-    (:func:`studio.fit.batch.compare_genders`: the same frames, each gender in its own poses or,
-    in the thesis' step, the shared ones); ``scores``: ``{gender: score}``
+    (the same frames: in the thesis' step in shared poses, :func:`studio.fit.batch.compare_genders`;
+    under ``gender_step`` ``"full"`` each gender's batch in its own); ``scores``: ``{gender: score}``
     (:func:`gender_scores`). The margin (loser − winner score) is the mean over the frames of
     d_p = cost_loser,p − cost_winner,p plus the per-batch terms (shape prior / P, stature
     evidence); its ``confidence`` interval is margin ± t_{P−1} · sd(d) / √P (Student's t, the

@@ -247,7 +247,8 @@ class BatchResult:
     :func:`gender_scores`), ``gender_terms`` (cost, Mahalanobis distance and score per gender) and
     ``margin`` (loser − winner score) with ``gender_test`` (:func:`gender_test`: is the margin above
     the frames' spread; all None when the gender was given), the shared ``shape``, per-frame ``poses``
-    (P, POSE_SIZE) and ``costs`` (P,) at the final level, ``total`` (eq. 6.7), ``consistency``."""
+    (P, POSE_SIZE) and ``costs`` (P,) at the final level, ``total`` (eq. 6.7), ``consistency``,
+    ``start`` (:func:`start_shape`: the shape it started from, in the first model's coefficients)."""
 
     gender: str
     shape: np.ndarray
@@ -263,6 +264,7 @@ class BatchResult:
     timings: dict = field(default_factory=dict)
     gender_terms: dict | None = None
     gender_test: dict | None = None
+    start: np.ndarray | None = None
 
     def to_json(self) -> dict:
         return {
@@ -386,10 +388,7 @@ def _full_genders(frames: list[BatchFrame], options: BatchOptions, runner) -> "B
 
     t0 = time.perf_counter()
     fits = {g: batch_fit(frames, gender=g, options=options, runner=runner) for g in ("female", "male")}
-    cands = {}
-    for g, r in fits.items():
-        m = BodyModel.load(g)
-        cands[g] = GenderFit(m, r.shape, r.total, start_shape(frames, m, options), r.costs)
+    cands = {g: GenderFit(BodyModel.load(g), r.shape, r.total, r.start, r.costs) for g, r in fits.items()}
     stature = float(np.mean([measure(c.model, c.shape)["stature"] for c in cands.values()]))
     history = fits["female"].history + fits["male"].history
     win, scores, terms, margin, test = _decide(cands, stature, options.n_shape_free, len(frames), history)
@@ -416,8 +415,9 @@ def batch_fit(frames: list[BatchFrame], *, gender: str = "auto", options: BatchO
     first = BodyModel.load("neutral" if gender == "auto" else gender)
     poses = np.array([f.pose for f in frames], dtype=np.float64)
     history: list = []
-    shape, poses, batch = _alternate(runner, first, frames, start_shape(frames, first, options), poses, options,
-                                     options.rounds, options.n_shape_free, history, first.gender)
+    start = start_shape(frames, first, options)
+    shape, poses, batch = _alternate(runner, first, frames, start, poses, options, options.rounds,
+                                     options.n_shape_free, history, first.gender)
     gender_costs, gender_terms, margin, test, model = None, None, None, None, first
     timings = {"first_model": round(time.perf_counter() - t0, 3)}
     if gender == "auto":
@@ -461,4 +461,4 @@ def batch_fit(frames: list[BatchFrame], *, gender: str = "auto", options: BatchO
     return BatchResult(gender=model.gender, shape=shape, frames=[f.frame for f in frames], poses=poses, costs=costs,
                        total=total, gender_costs=gender_costs, margin=margin, consistency=cons, history=history,
                        options=options.to_dict(), timings=timings, gender_terms=gender_terms,
-                       gender_test=test)
+                       gender_test=test, start=start)

@@ -11,8 +11,9 @@
 4. **Batch** (:func:`studio.fit.batch.batch_fit`): gender by batch unless given. ``clothing``
    ``tight`` / ``loose`` set the cost; ``auto`` fits ``loose`` and calls the clothing tight when
    the batch body explains nearly all of the clothing pixels (recall ≥ :data:`TIGHT_RECALL`), then
-   refits with the tight cost — and keeps the loose batch when that refit's body is implausible
-   where the loose one is not (:func:`implausible_tight`: the clothes were not tight).
+   fits the batch ``tight`` fits (from the single fits, the gender decided by the tight rule,
+   ``BatchOptions.gender_step``) — and keeps the loose batch when that body is implausible where
+   the loose one is not (:func:`implausible_tight`: the clothes were not tight).
 5. ``fit/batch.json`` (format ``studio.fit-batch`` v1) and ``fit/batch_neutral.ply`` (the batch
    body in the model's default pose), written atomically; its ``quality`` (:func:`batch_quality`)
    is ``suspect`` when the frames may not show one person or the gender is within the frames' noise.
@@ -94,7 +95,7 @@ def clothing_from_coverage(coverage: float, threshold: float = TIGHT_RECALL) -> 
 
 def implausible_tight(loose: dict, tight: dict, gender: str) -> list[str]:
     """Why a ``clothing="auto"`` call of *tight* is refused: the measurements (metres, kg; names of
-    :func:`studio.body.measure`) of the tight refit's body that lie beyond the quality gates'
+    :func:`studio.body.measure`) of the tight batch's body that lie beyond the quality gates'
     population bound (|z| above the first of :data:`studio.fit.quality.POPULATION_Z` against ANSUR II) where the
     loose batch body's do not. A garment called tight that is not makes the tight cost fill it
     (the shipped ``clothing_11`` sample, a long shirt over a skirt: coverage 0.83, hip girth
@@ -193,18 +194,15 @@ def fit_batch_session(
                 decided = {"clothing_recall": round(recall, 4), "threshold": TIGHT_RECALL}
                 if clothing_from_coverage(recall) == "tight":
                     kind = "tight"
-                    refit = [replace(b, pose=p, shape=result.shape, gender=result.gender)
-                             for b, p in zip(batch_frames, result.poses, strict=True)]
-                    tight = batch_fit(refit, gender=result.gender, options=replace(options, clothing="tight", rounds=1),
+                    # the batch `--clothing tight` fits (from the single fits; its own gender rule)
+                    tight = batch_fit(batch_frames, gender=batch_gender, options=replace(options, clothing="tight"),
                                       runner=runner)
-                    model = BodyModel.load(result.gender)
-                    why = implausible_tight(measure(model, result.shape), measure(model, tight.shape), result.gender)
+                    why = implausible_tight(measure(BodyModel.load(result.gender), result.shape),
+                                            measure(BodyModel.load(tight.gender), tight.shape), tight.gender)
                     if why:  # the clothes are not tight: the tight cost filled them
                         kind, decided["tight_refused"] = "loose", why
                     else:
-                        result = replace(tight, gender_costs=result.gender_costs, gender_terms=result.gender_terms,
-                                         margin=result.margin, gender_test=result.gender_test,
-                                         history=result.history + tight.history)
+                        result = replace(tight, history=result.history + tight.history)
                 decided["chosen"] = kind
             where = runner.where
     except ExecutionError as exc:
@@ -276,7 +274,8 @@ def run_batch_command(args, ws, frames, options: FitOptions) -> int:
 
     if args.batch_frames < 2:
         raise CommandError(f"--batch-frames must be >= 2, got {args.batch_frames}")
-    batch_options = BatchOptions(pose_evaluations=60, shape_evaluations=80, rounds=1) if args.quick else BatchOptions()
+    quick = {"pose_evaluations": 60, "shape_evaluations": 80, "rounds": 1} if args.quick else {}
+    batch_options = BatchOptions(gender_step=args.gender_step, **quick)
     with Progress("[progress.description]{task.description}", BarColumn(), MofNCompleteColumn(),
                   TimeElapsedColumn()) as bar:
         task = bar.add_task("single-frame fits", total=len(frames) if frames else args.batch_frames)
@@ -297,7 +296,7 @@ def run_batch_command(args, ws, frames, options: FitOptions) -> int:
           f"results in {ws.layout.fit_batch}")
     refused = (obj.get("clothing_auto") or {}).get("tight_refused")
     if refused:
-        print("clothing called loose: the tight refit's body was implausible (" + "; ".join(refused) + ")")
+        print("clothing called loose: the tight batch's body was implausible (" + "; ".join(refused) + ")")
     cons = obj["consistency"]
     if cons["flagged"]:
         print("WARNING: the frames may not show one person: " + "; ".join(cons["reasons"]))

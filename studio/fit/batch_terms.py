@@ -38,9 +38,9 @@ from studio.fit.objective import FrameObjective
 if TYPE_CHECKING:
     from studio.fit.batch import BatchFrame
 
-__all__ = ["KNEE_INDICES", "KNEE_SIGMA", "GENDER_STEPS", "LOOSE_BUILD_WEIGHT", "STRAIGHT_CAP", "BatchOptions", "ClothedObjective",
-           "build_prior", "clothing_residuals", "clothing_targets", "head_band", "knee_term", "on_floor",
-           "stature_direction", "with_head_skin"]
+__all__ = ["KNEE_INDICES", "KNEE_SIGMA", "GENDER_STEPS", "LOOSE_BUILD_WEIGHT", "STRAIGHT_CAP", "BatchOptions",
+           "ClothedObjective", "build_prior", "clothing_residuals", "clothing_targets", "head_band", "knee_term",
+           "on_floor", "stature_direction", "with_head_skin"]
 
 #: pose-vector indices of the knee hinges (the lower legs' joint angles)
 KNEE_INDICES = tuple(pose_slices()[PART_NAMES.index(p)].start for p in ("lowerleg_l", "lowerleg_r"))

@@ -275,3 +275,31 @@ def test_cli_batch_writes_batch_json_mesh_and_the_report_uses_it(tmp_path, capsy
     assert "--batch-frames must be >= 2" in capsys.readouterr().err
     assert main(["fit", str(tmp_path / "s"), "--batch", "--shadows"]) == 1
     assert "--shadows and --batch together" in capsys.readouterr().err
+    with pytest.raises(SystemExit):  # argparse's choices
+        main(["fit", str(tmp_path / "s"), "--batch", "--gender-step", "round"])
+    assert "invalid choice: 'round'" in capsys.readouterr().err
+
+
+def test_auto_clothing_called_tight_fits_the_batch_tight_fits(tmp_path, monkeypatch):
+    """``--clothing auto`` that calls the clothes tight fits the very batch ``--clothing tight``
+    fits (from the single fits, the tight gender rule), not a tight round from the loose batch's
+    body: the figures measured with ``--clothing tight`` are those auto gives a tightly dressed
+    person."""
+    import studio.fit.batch_session as bs
+    from studio.fit.batch import BatchOptions
+
+    make_session(tmp_path / "s", n_frames=2)
+    opts = BatchOptions(levels=(2, 1), rounds=1, pose_evaluations=20, shape_evaluations=30, final_evaluations=20,
+                        pose_iterations=2)
+    run = dict(frames=[0, 1], gender="female", single_options=TINY, options=opts, chain_length=1)
+    tight = bs.fit_batch_session(tmp_path / "s", clothing="tight", **run)
+    calls = []
+    monkeypatch.setattr(bs, "clothing_from_coverage", lambda c: calls.append(c) or "tight")
+    auto = bs.fit_batch_session(tmp_path / "s", clothing="auto", **run)
+    assert len(calls) == 1 and 0.5 < calls[0] <= 1.0  # the loose batch body covers the (tight) clothes
+    assert auto["clothing"] == "tight" and auto["clothing_auto"]["chosen"] == "tight"
+    assert auto["shape"] == tight["shape"] and auto["poses"] == tight["poses"] and auto["total"] == tight["total"]
+    n = len(tight["history"])
+    assert auto["settings"]["clothing"] == "tight"
+    assert [h["cost"] for h in auto["history"][-n:]] == [h["cost"] for h in tight["history"]]
+    assert len(auto["history"]) > len(tight["history"])  # the loose batch's rounds before it

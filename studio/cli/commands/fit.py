@@ -48,6 +48,10 @@ def register(subparsers) -> None:
     p.add_argument("--clothing", default="auto", choices=["auto", "tight", "loose"],
                    help="--batch: clothing-robust cost; auto fits loose and calls it tight when the body fills "
                         "the clothes (default: %(default)s)")  # fmt: skip
+    p.add_argument("--gender-step", default=None, choices=["neutral", "full"],
+                   help="--batch --gender auto: neutral = the thesis' step (neutral batch, then each gender's shape "
+                        "with the poses fixed), full = a complete batch per gender (default: full under tight "
+                        "clothing, neutral under loose)")  # fmt: skip
     p.add_argument("--batch-frames", type=int, default=8,
                    help="--batch without --frames: how many frames to choose (good quality, diverse postures; "
                         "default: %(default)s)")  # fmt: skip

@@ -278,6 +278,24 @@ def test_cli_batch_writes_batch_json_mesh_and_the_report_uses_it(tmp_path, capsy
     with pytest.raises(SystemExit):  # argparse's choices
         main(["fit", str(tmp_path / "s"), "--batch", "--gender-step", "round"])
     assert "invalid choice: 'round'" in capsys.readouterr().err
+    # --gender-step reaches the batch's options; without it the per-condition default stands
+    from dataclasses import replace
+
+    import studio.fit.batch_session as bs
+
+    seen = []
+
+    def stop(ws, **kw):
+        seen.append(kw)
+        raise FitError("stopped here")
+
+    monkeypatch.setattr(bs, "fit_batch_session", stop)
+    for extra in (["--gender-step", "neutral"], []):
+        assert main(["fit", str(tmp_path / "s"), "--batch", "--clothing", "tight", *extra]) == 1
+        assert "stopped here" in capsys.readouterr().err
+    assert [kw["options"].gender_step for kw in seen] == ["neutral", None]
+    # the command's options are the loose defaults; fit_batch_session sets the clothing it fits
+    assert [replace(kw["options"], clothing="tight").gender_fit for kw in seen] == ["neutral", "full"]
 
 
 def test_auto_clothing_called_tight_fits_the_batch_tight_fits(tmp_path, monkeypatch):

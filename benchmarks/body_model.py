@@ -404,6 +404,8 @@ def pictures(results: dict) -> list[Path]:
 
 
 def main() -> int:
+    from rigs.atomic import atomic_write_text
+
     RESULTS.mkdir(parents=True, exist_ok=True)
     results: dict = {"anchor": "thesis fig. 3.9/3.10 (6-20 components), TenBo ~3.7 mm; Anny+torch ~60 ms / 64 bodies"}
     speed(results)
@@ -426,7 +428,7 @@ def main() -> int:
             shutil.copyfile(p, docs / p.name)
             print(f"picture: {p} (copied to {docs / p.name}, {p.stat().st_size / 1e3:.0f} kB)")
     path = RESULTS / "body_model.json"
-    path.write_text(json.dumps(results, indent=1))
+    atomic_write_text(path, json.dumps(results, indent=1), mkdir=True)
     print(f"\nwrote {path}")
     return 0
 

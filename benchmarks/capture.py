@@ -100,6 +100,8 @@ def bench_record(source: Path, out: Path, n: int, level: int) -> tuple[float, di
 
 
 def main() -> None:
+    from rigs.atomic import atomic_write_text
+
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--frames", type=int, default=240, help="multi-frames recorded per row")
     args = ap.parse_args()
@@ -129,8 +131,7 @@ def main() -> None:
         "rows": [{"path": n, "multiframes_per_s": round(r, 2), **e} for n, r, e in rows],
     }  # fmt: skip
     out = ROOT / "benchmarks" / "results" / "capture.json"
-    out.parent.mkdir(parents=True, exist_ok=True)
-    out.write_text(json.dumps(result, indent=2) + "\n")
+    atomic_write_text(out, json.dumps(result, indent=2) + "\n", mkdir=True)
     print(f"wrote {out}")
 
 

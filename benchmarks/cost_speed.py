@@ -15,8 +15,6 @@ Run: ``.venv/bin/python benchmarks/cost_speed.py``; writes
 from __future__ import annotations
 
 import json
-import os
-import tempfile
 import time
 from pathlib import Path
 
@@ -63,6 +61,8 @@ def timed(fn, repeats: int) -> tuple[float, float]:
 
 
 def main() -> None:
+    from rigs.atomic import atomic_write_text
+
     rng = np.random.default_rng(0)
     centres = W / 2 + rng.uniform(-40, 40, VIEWS)
     observed = [person_mask(cx) for cx in centres]
@@ -105,15 +105,9 @@ def main() -> None:
               f"{r['eval_ms']:>8.2f} {r['eval_median_ms']:>7.2f} "
               f"{r['whole_image_eval_ms']:>9.2f} {r['cost_px']:>8.3f} {'yes' if r['meets_target'] else 'NO':>3}")
     out = Path(__file__).resolve().parent / "results" / "cost_speed.json"
-    out.parent.mkdir(parents=True, exist_ok=True)
     payload = {"benchmark": "cost_speed", "anchor": f"<= {TARGET_MS} ms per 4-view evaluation at {W}x{H}",
                "views": VIEWS, "tau_px": TAU, "rows": rows}
-    fd, tmp = tempfile.mkstemp(dir=out.parent, suffix=".tmp")
-    with os.fdopen(fd, "w") as fh:
-        json.dump(payload, fh, indent=2)
-        fh.flush()
-        os.fsync(fh.fileno())
-    os.replace(tmp, out)
+    atomic_write_text(out, json.dumps(payload, indent=2), mkdir=True)
     print(f"wrote {out}")
 
 

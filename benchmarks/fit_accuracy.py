@@ -57,6 +57,8 @@ def measurement_lines(table: dict) -> list[str]:
 
 
 def main(argv=None) -> int:
+    from rigs.atomic import atomic_write_text
+
     from studio.body import BodyModel
     from studio.cli.commands.fit import QUICK
     from studio.fit import FitOptions, fit_frame, fit_session, load_fits
@@ -146,8 +148,7 @@ def main(argv=None) -> int:
         "total_time_s": time.perf_counter() - t0,
     }
     out = ROOT / "benchmarks" / "results" / "fit_accuracy.json"
-    out.parent.mkdir(parents=True, exist_ok=True)
-    out.write_text(json.dumps(result, indent=2) + "\n")
+    atomic_write_text(out, json.dumps(result, indent=2) + "\n", mkdir=True)
 
     print(f"fit accuracy — walk sample, frames {frames}, {len(frames)} fits in {t_fit:.0f} s ({args.workers} workers)")
     print(f"{'quantity':34s} {'value':>14s}   anchor")

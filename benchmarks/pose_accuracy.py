@@ -170,7 +170,10 @@ VARIANTS = {"full": {}, "no-library": {"start": "stride"}, "no-rival": {"rival_h
             # issue 13: the held-out people on the studio's person masks (STUDIO_MORPHOLOGY: 3 px median, no opening;
             # the fingers kept), the same fitting code as bridges; on dev the masks equal those of the harness variant
             # dev-seg-m3o0 (stop 53, outside the repository)
-            "person-mask": {}}
+            "person-mask": {},
+            # issue 13: the stool's region found again from the final body and the fit's polish once more
+            # under it where it differs (dev: dev-seat-support)
+            "dev-seat-support": {}, "seat-support": {}}
 STANDING = ("a_pose", "t_pose", "arms_overhead", "hands_on_hips", "arm_forward", "arms_crossed", "wide_stance",
             "torso_twist")
 

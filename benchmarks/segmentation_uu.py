@@ -117,6 +117,8 @@ def bench_uu(data: Path, results_dir: Path, quick: bool) -> dict | None:
 
 def _calibrated_session(root: Path, tmp: Path, frames: str) -> Path:
     """Calibrate the rig from the board videos and import ``frames`` of the person videos."""
+    from rigs.atomic import atomic_write_text
+
     import contextlib
     import io
     import json
@@ -127,9 +129,9 @@ def _calibrated_session(root: Path, tmp: Path, frames: str) -> Path:
     ref = RigCalibration.load_any(root)
     RigCalibration({n: c.replace(R=np.eye(3), t=np.zeros(3)) for n, c in ref.cameras.items() if n in CAMS}).save(
         tmp / "intrinsics.json")  # fmt: skip
-    (tmp / "board.yaml").write_text("name: uu_floor_8x6\nkind: checkerboard\ninner_corners: [8, 6]\nsquare_size: 0.115\n")
+    atomic_write_text(tmp / "board.yaml", "name: uu_floor_8x6\nkind: checkerboard\ninner_corners: [8, 6]\nsquare_size: 0.115\n")
     corner0 = np.zeros((1, 3))
-    (tmp / "corners.json").write_text(json.dumps({n: [round(float(v)) for v in ref[n].project(corner0)[0]] for n in CAMS}))
+    atomic_write_text(tmp / "corners.json", json.dumps({n: [round(float(v)) for v in ref[n].project(corner0)[0]] for n in CAMS}))
     boards = [f"{n}={root / n / 'checkerboard.avi'}" for n in CAMS]
     common = ["--board", str(tmp / "board.yaml"), "--video-frames", "0,60"]
     session = tmp / "session"

@@ -23,6 +23,8 @@ ANCHOR_HZ = 60.0
 
 
 def main() -> None:
+    from rigs.atomic import atomic_write_text
+
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--frames", type=int, default=8, help="walk frames to time")
     args = ap.parse_args()
@@ -111,8 +113,7 @@ def main() -> None:
         print(f"{name}: {wrong} of {total} silhouette pixels differ from the exact sampler")
     results["alternatives_pixel_errors"] = {k: {"wrong": w, "silhouette": t} for k, (w, t) in errors.items()}
     out = ROOT / "benchmarks" / "results" / "simulate.json"
-    out.parent.mkdir(parents=True, exist_ok=True)
-    out.write_text(json.dumps(results, indent=2))
+    atomic_write_text(out, json.dumps(results, indent=2), mkdir=True)
     print(f"wrote {out}")
 
 

@@ -182,12 +182,11 @@ def fit_batch_session(
         masks = dict(zip(ws.session.cameras, ws.person_masks(f), strict=True))
         batch_frames.append(BatchFrame(f, cameras_of[f], [masks[c.name] for c in cameras_of[f]], skin[f],
                                        fits[f].pose, fits[f].shape, fits[f].gender))
-    batch_gender = gender if gender != "auto" else "auto"
     decided = {}
     try:
         with open_runner(min(workers, len(chosen)), scheduler) as runner:
             kind = "loose" if clothing == "auto" else clothing
-            result = batch_fit(batch_frames, gender=batch_gender, options=replace(options, clothing=kind),
+            result = batch_fit(batch_frames, gender=gender, options=replace(options, clothing=kind),
                                runner=runner)
             if clothing == "auto":
                 recall = _clothing_recall(result, batch_frames)
@@ -195,7 +194,7 @@ def fit_batch_session(
                 if clothing_from_coverage(recall) == "tight":
                     kind = "tight"
                     # the batch `--clothing tight` fits (from the single fits; its own gender rule)
-                    tight = batch_fit(batch_frames, gender=batch_gender, options=replace(options, clothing="tight"),
+                    tight = batch_fit(batch_frames, gender=gender, options=replace(options, clothing="tight"),
                                       runner=runner)
                     why = implausible_tight(measure(BodyModel.load(result.gender), result.shape),
                                             measure(BodyModel.load(tight.gender), tight.shape), tight.gender)

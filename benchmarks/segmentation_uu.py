@@ -117,13 +117,12 @@ def bench_uu(data: Path, results_dir: Path, quick: bool) -> dict | None:
 
 def _calibrated_session(root: Path, tmp: Path, frames: str) -> Path:
     """Calibrate the rig from the board videos and import ``frames`` of the person videos."""
-    from rigs.atomic import atomic_write_text
-
     import contextlib
     import io
     import json
 
     from calibration import RigCalibration
+    from rigs.atomic import atomic_write_text
     from studio.cli import main
 
     ref = RigCalibration.load_any(root)

@@ -139,7 +139,7 @@ def test_the_stool_found_again_from_the_final_body(model, monkeypatch):
 
     def spy_polish(obj, x, *args, **kw):
         out = real_polish(obj, x, *args, **kw)
-        polished.append((obj, np.array(x), out[0], out[1], kw["level"]))
+        polished.append((obj, np.array(x), *out[:2], kw["level"]))
         return out
 
     monkeypatch.setattr(frame, "find_support", sunk_after_search)
@@ -150,7 +150,7 @@ def test_the_stool_found_again_from_the_final_body(model, monkeypatch):
     grown = [int(a.sum()) - int(b.sum()) for a, b in zip(final.ignore, searched.ignore)]
     assert sum(grown) > 0, grown  # the final body's region holds more of the seat
     assert len(polished) == 2 and "support_polish" in fit.timings
-    level, (again, x2, out, x3, _) = polished[0][4], polished[1]
+    again, x2, out, x3, level = polished[1]
     # the new region's cost: the second polish's answer below the final stage's body
     before, after = again.terms(x2, level)["total"], out.terms(x3, level)["total"]
     assert after < 0.9 * before, (before, after)  # 0.185 -> 0.143

@@ -60,7 +60,10 @@ kept). ``dev-32`` / ``dev-48``: the shipped fit on the dev split grown to 32 / 4
 ``bridges``: on masks with the segmentation's bridges); ``dev-pull05`` / ``dev-pull20``: the polish's shape prior
 pulling from the mean (threshold 0 σ, weight 0.05 / 0.2; the girth bias, not kept). ``dev-ext3``: the shipped fit
 with a model whose pose deformation has a third joint per triangle (git branch ``experiment/third-joint``, its model
-rebuilt there; not kept). ``--families`` fits only the frames
+rebuilt there; not kept). ``seat-support`` / ``dev-seat-support``: the stool's region found again from the final
+body; ``dev-120``: that code on the dev split grown to 120 people (``--people 120 --split dev``; its half squats).
+``fourth`` / ``dev-fourth``: a frame still costly after its third attempt searched a fourth time, from the first
+attempt's posture at the library's other statures of it. ``--families`` fits only the frames
 of the named posture families (e.g. ``--families seated`` for ``no-support``).
 
 Splits (``--split``): ``held-out`` (the default, seeds from 1000, only ever measured: the figures
@@ -173,7 +176,12 @@ VARIANTS = {"full": {}, "no-library": {"start": "stride"}, "no-rival": {"rival_h
             "person-mask": {},
             # issue 13: the stool's region found again from the final body and the fit's polish once more
             # under it where it differs (dev: dev-seat-support)
-            "dev-seat-support": {}, "seat-support": {}}
+            "dev-seat-support": {}, "seat-support": {},
+            # ... its code on the dev split grown to 120 people (their half squats: `--families half_squat`)
+            "dev-120": {},
+            # issue 13: a frame still costly after its third attempt searched a fourth time, from the first
+            # attempt's posture at the library's other statures of it
+            "dev-fourth": {}, "fourth": {}}
 STANDING = ("a_pose", "t_pose", "arms_overhead", "hands_on_hips", "arm_forward", "arms_crossed", "wide_stance",
             "torso_twist")
 

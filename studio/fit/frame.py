@@ -124,8 +124,9 @@ def fit_frame(
     ground=None,
     light_uncertainty: dict | None = None,
     _attempt: int = 0,
-    _avoid: tuple[str, ...] = (),
+    _avoid: tuple = (),
     _own_statures: bool = False,
+    _family: str | None = None,
 ) -> FrameFit:
     """Fit ``model`` to one frame's observed silhouettes.
 
@@ -233,8 +234,14 @@ def fit_frame(
         starts = grid[:4]
         if match is not None:  # the library's shortlist, scored by the silhouette cost (eq. 4.6)
             poses, families, statures = match["poses"], list(match["families"]), np.asarray(match["statures"])
-            keep = [i for i, f in enumerate(families) if f not in _avoid]
-            if len(keep) < len(families) and keep:  # a retry: the postures the last attempt started from are left out
+            # a retry: the postures the last attempts started from are left out — whole families
+            # (names) or a family at the stature it was tried at ((name, m)); ``_family``: only its
+            # postures (when the shortlist has any left)
+            keep = [i for i, (f, h) in enumerate(zip(families, statures, strict=True))
+                    if f not in _avoid and not any(a[0] == f and abs(a[1] - h) < 1e-6 for a in _avoid if isinstance(a, tuple))]
+            if _family is not None and any(families[i] == _family for i in keep):
+                keep = [i for i in keep if families[i] == _family]
+            if len(keep) < len(families) and keep:
                 poses, families, statures = poses[keep], [families[i] for i in keep], statures[keep]
             if _own_statures and init_height is not None and shape is None:
                 # the last resort of a flagged frame: each candidate scored at the stature the
@@ -460,9 +467,17 @@ def fit_frame(
                 and search_again(fit.quality, cameras)):
             # still flagged or costly: once more from the library's other postures, each at its own stature
             avoid += tuple(f for f in (again.costs.get("start_family"),) if f is not None)
-            last = attempt(seed=np.random.default_rng(seed).integers(2**31, size=2)[1], _attempt=retries,
-                           _avoid=avoid, _own_statures=True)
+            draws = np.random.default_rng(seed).integers(2**31, size=3)
+            last = attempt(seed=draws[1], _attempt=retries, _avoid=avoid, _own_statures=True)
             fit = keep_best(fit, last)
+            if start_family is not None and init_height is not None and search_again(fit.quality, cameras):
+                # and still: the first attempt's posture (the descriptor's best) from the library's
+                # other statures of it, each at its own. The library's statures step 6 % and a squat's
+                # is ambiguous: a dev half squat started at 1.79 m (true 1.71) ended 44.6 mm off and
+                # its other postures' attempts 54.1 / 20.6 mm; from the half squat at 1.69, 4.5 mm
+                other = attempt(seed=draws[2], _attempt=retries, _avoid=((start_family, init_height),),
+                                _own_statures=True, _family=start_family)
+                fit = keep_best(fit, other)
     return fit
 
 

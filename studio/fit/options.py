@@ -135,7 +135,10 @@ class FitOptions:
     compare fairly) one retry is on: dev, 64 frames with the shape prior and the front/back twin,
     5 flagged: an arm forward started as arms crossed 17.5 → 5.1 mm, a T-pose 16.3 → 9.8 mm, a
     half squat 33.4 → 30.8 mm; `ok` 92.2 → 95.3 %, mean surface 8.08 → 7.74 mm, p90 12.4 → 11.5;
-    a flagged frame takes twice the time (mean 12.3 → 14.2 s per frame, two at once).
+    a flagged frame takes twice the time (mean 12.3 → 14.2 s per frame, two at once). Still flagged
+    or costly after the retry, a frame is searched a third time (the library's other postures,
+    each at its own stature) and, costly still, a fourth (the first attempt's posture at the
+    library's other statures of it): :func:`studio.fit.frame.fit_frame`.
 
     Frames fitted alone from the silhouettes (walk, frames 0/6/12/18/21): with the cone search,
     stride postures and the limb re-search the joint error was 17/13/29/29/21 mm; SCAPE search

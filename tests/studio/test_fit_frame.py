@@ -105,10 +105,11 @@ def test_a_fit_of_several_views_explaining_them_poorly_is_searched_again_from_ot
     """A frame of several views whose fitted body the agreement gates flag is searched again with
     other draws, the library posture the first attempt started from left out; flagged still, a
     third time without either start, the library's candidates each scored at its own stature;
-    the lowest total cost is kept, every attempt's cost and CPU recorded."""
+    costly still, a fourth time from the first attempt's posture at the library's other statures
+    of it; the lowest total cost is kept, every attempt's cost and CPU recorded."""
     from dataclasses import replace
 
-    from studio.fit.result import explains_poorly
+    from studio.fit.result import explains_poorly, search_again
 
     model, cams, shape, pose, V, masks = scene
     tiny = FitOptions(levels=(2, 2, 2), n_particles=8, n_layers=1, nm_evaluations=4, final_evaluations=4,
@@ -131,12 +132,20 @@ def test_a_fit_of_several_views_explaining_them_poorly_is_searched_again_from_ot
     from studio.fit.init import hull_centroid
     from studio.fit.library import library_match
 
-    shortlist = library_match(model.search_model(), cams, masks, hull_centroid(cams, masks),
-                              shortlist=RETRY_SHORTLIST)["families"]
+    match = library_match(model.search_model(), cams, masks, hull_centroid(cams, masks), shortlist=RETRY_SHORTLIST)
+    shortlist = match["families"]
     others = set(shortlist) - {first, again.costs["start_family"]}
     assert last.costs["start_family"] in (others or set(shortlist))
+    kept = min(kept, last, key=lambda f: f.costs["total"])
+    assert search_again(kept.quality, cams)  # so a fourth attempt follows
+    tried = once.costs["init_stature_m"]
+    fourth = fit_frame(model, cams, masks, options=tiny, seed=np.random.default_rng(3).integers(2**31, size=3)[2],
+                       _attempt=1, _avoid=((first, tried),), _own_statures=True, _family=first)
+    # the first attempt's posture again, from another of its statures in the shortlist
+    assert any(f == first and abs(h - tried) > 1e-6 for f, h in zip(shortlist, match["statures"], strict=True))
+    assert fourth.costs["start_family"] == first and abs(fourth.costs["init_stature_m"] - tried) > 1e-6
     fit = fit_frame(model, cams, masks, options=replace(tiny, retries=1), seed=3)
-    tries = [once.costs["total"], again.costs["total"], last.costs["total"]]
+    tries = [once.costs["total"], again.costs["total"], last.costs["total"], fourth.costs["total"]]
     np.testing.assert_allclose(fit.costs["attempt_costs"], tries, rtol=1e-12)
     assert fit.costs["total"] == min(tries)
     assert fit.timings["cpu_all_attempts"] > fit.timings["cpu"] > 0

@@ -20,7 +20,8 @@ what is missing or was done by other code or on other masks):
   the spread across subjects;
 - gender: single pose (neutral body of the frame's fit, then female and male shape steps with the
   pose fixed, §6.4.5), vote (majority of the single poses, ties to the summed margin), batch;
-  how many batches the paired test over the frames calls uncertain, and how many of those are wrong;
+  how many batches the paired test over the frames (with its floor on the margin) calls uncertain,
+  and how many of those are wrong;
 - skin: precision / recall against the simulator's true skin pixels of the segmentation's
   self-trained classifier (fig. 6.3 box) and of the session-adapted one (fitted hands and face);
   on the real SFA / abdomen masks via ``benchmarks/segmentation.py``'s skin section.
@@ -491,7 +492,7 @@ def table(args) -> int:
               f"(thesis {THESIS_GENDER['single']} / {THESIS_GENDER['vote']} / {THESIS_GENDER['batch']} %)"
               + (f"; batch by the cost alone {g['batch_cost_only']:.0f} %" if "batch_cost_only" in g else ""))
         if (u := s.get("gender_uncertain")) is not None:
-            print(f"gender flagged uncertain (95 % paired interval reaches 0): {u['flagged']} of {s['subjects']} "
+            print(f"gender flagged uncertain (95 % paired interval reaches 0, or margin below the floor): {u['flagged']} of {s['subjects']} "
                   f"({u['wrong_flagged']} wrong, {u['right_flagged']} right); not flagged: {u['sure']}, "
                   f"{u['wrong_sure']} wrong")
         sk = s["skin"]

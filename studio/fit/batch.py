@@ -24,7 +24,8 @@ stature among that sex in ANSUR II (:func:`gender_scores`). The weight is 0, the
 (the lower cost wins): from the mean build of its stature the loose cost separates the sexes,
 and a stature prior calls tall women male (the constant says how it was chosen).
 Whether the frames agree is tested too (:func:`~studio.fit.batch_gender.gender_test`: a paired
-t interval over the per-frame cost differences of the two fits); a margin within that noise is
+t interval over the per-frame cost differences of the two fits); a margin within that noise, or
+below :data:`~studio.fit.batch_gender.GENDER_MARGIN_FLOOR` whatever the interval, is
 ``uncertain``, and ``fit/batch.json``'s quality and ``studio report`` say so.
 
 **Consistency** (§6.4.2: shape varies little with pose, much across people): the frames' own

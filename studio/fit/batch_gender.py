@@ -6,7 +6,7 @@ into the decision: the batch cost (eq. 6.7) per frame plus :data:`GENDER_PRIOR_W
 default: the thesis' rule) × the stature evidence (:func:`stature_evidence`, ANSUR II), with
 the stature evidence and the Mahalanobis distances of the shapes in each gender's PCA reported
 beside; :func:`gender_test` says whether the decision rises above the batch's own noise (a
-paired test over its frames).
+paired test over its frames, with a floor under the margin).
 """
 
 from __future__ import annotations
@@ -16,7 +16,7 @@ import numpy as np
 from studio.cost import shape_prior
 from studio.fit.errors import FitError
 
-__all__ = ["GENDER_CONFIDENCE", "GENDER_PRIOR_WEIGHT", "gender_scores", "gender_test", "stature_evidence"]
+__all__ = ["GENDER_CONFIDENCE", "GENDER_MARGIN_FLOOR", "GENDER_PRIOR_WEIGHT", "gender_scores", "gender_test", "stature_evidence"]
 
 #: Weight of the stature evidence against the batch cost per frame in the gender decision
 #: (:func:`gender_scores`); 0: the thesis' rule (§6.4.5), the lower batch cost wins, the stature
@@ -32,8 +32,20 @@ GENDER_PRIOR_WEIGHT = 0.0
 
 #: Two-sided confidence of :func:`gender_test`'s interval on the mean per-frame margin: the
 #: decision is ``uncertain`` when that interval reaches zero (the conventional 95 %, not chosen on
-#: any benchmark).
+#: any benchmark) or the margin is below :data:`GENDER_MARGIN_FLOOR`.
 GENDER_CONFIDENCE = 0.95
+
+#: Smallest margin per frame (loser − winner score) :func:`gender_test` vouches for, whatever its
+#: interval. The frames of a batch share one shape, so their margins are not independent samples and
+#: the t interval is too narrow: a small margin is redrawn by any change upstream (a reported loose
+#: man's went −0.002 → +0.003 → +0.017 over three versions of the masks and the fit, its interval
+#: clearing zero at the last). Chosen on the dev split (``clothing.py --split dev``, 4 postures, seeds
+#: 3000–3027: 10 loose and 21 tight batches): the two wrong calls had margins 0.018 and 0.042 (the
+#: latter's interval +0.005 … +0.079, vouched for by the test alone), every tight margin was ≥ 0.104,
+#: the right loose ones 0.023–0.161; 0.05 is the next round figure above the largest wrong margin. It
+#: flags 3 more of the 10 dev loose batches (the wrong one and two right ones at 0.023 and 0.049) and
+#: no tight one.
+GENDER_MARGIN_FLOOR = 0.05
 
 
 def _mahalanobis(model, shape: np.ndarray, k: int) -> float:
@@ -78,7 +90,8 @@ def gender_scores(candidates: dict, stature: float, n_coefficients: int, weight:
     return out
 
 
-def gender_test(per_frame: dict, scores: dict, confidence: float = GENDER_CONFIDENCE) -> dict | None:
+def gender_test(per_frame: dict, scores: dict, confidence: float = GENDER_CONFIDENCE,
+                floor: float = GENDER_MARGIN_FLOOR) -> dict | None:
     """Is the gender decision of a batch above its own noise? A paired test over its frames.
 
     ``per_frame``: ``{gender: (P,)}`` each frame's clothing cost under that gender's fit
@@ -87,9 +100,10 @@ def gender_test(per_frame: dict, scores: dict, confidence: float = GENDER_CONFID
     (:func:`gender_scores`). The margin (loser − winner score) is the mean over the frames of
     d_p = cost_loser,p − cost_winner,p plus the per-batch terms (shape prior / P, stature
     evidence); its ``confidence`` interval is margin ± t_{P−1} · sd(d) / √P (Student's t, the
-    frames as the sample). ``uncertain`` when the interval's lower end is ≤ 0: some frames favour
-    the other sex about as much as the rest favour the winner, so the batch cannot tell. None for
-    fewer than two frames (no spread to test against)."""
+    frames as the sample). ``uncertain`` when the interval's lower end is ≤ 0 (some frames favour
+    the other sex about as much as the rest favour the winner, so the batch cannot tell) or the
+    margin is below ``floor`` (:data:`GENDER_MARGIN_FLOOR`: the frames agreeing on a margin that
+    small is no evidence). None for fewer than two frames (no spread to test against)."""
     from scipy.stats import t as student
 
     win = min(scores, key=scores.get)
@@ -103,4 +117,5 @@ def gender_test(per_frame: dict, scores: dict, confidence: float = GENDER_CONFID
     half = float(student.ppf(0.5 + confidence / 2, len(d) - 1) * se)
     return {"winner": win, "margin": margin, "per_frame": [round(float(v), 6) for v in d],
             "frames_for_winner": int((d > 0).sum()), "se": se, "confidence": confidence,
-            "interval": [margin - half, margin + half], "uncertain": bool(margin - half <= 0.0)}
+            "interval": [margin - half, margin + half], "floor": float(floor),
+            "uncertain": bool(margin - half <= 0.0 or margin < floor)}

@@ -234,8 +234,9 @@ def gender_warning(test: dict | None) -> str | None:
         return None
     lo, hi = test["interval"]
     n = len(test["per_frame"])
-    return (f"gender uncertain: {test['winner']} by {test['margin']:.3f} per frame, "
-            f"{test['confidence'] * 100:.0f} % interval {lo:+.3f} … {hi:+.3f} reaches 0 "
+    why = (f"{test['confidence'] * 100:.0f} % interval {lo:+.3f} … {hi:+.3f} reaches 0" if lo <= 0 else
+           f"below the {test['floor']:.3f} the frames' agreement can vouch for")
+    return (f"gender uncertain: {test['winner']} by {test['margin']:.3f} per frame, {why} "
             f"({test['frames_for_winner']} of {n} frames favour {test['winner']})")
 
 

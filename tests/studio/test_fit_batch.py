@@ -9,7 +9,7 @@ from studio.fit import FitOptions, fit_frame
 from studio.fit.frame import build_targets
 from studio.fit.batch import BatchFrame, BatchOptions, batch_fit, convert_shape, on_floor
 from studio.fit.batch_frames import choose_frames
-from studio.fit.batch_gender import GENDER_PRIOR_WEIGHT, gender_scores, gender_test, stature_evidence
+from studio.fit.batch_gender import GENDER_MARGIN_FLOOR, GENDER_PRIOR_WEIGHT, gender_scores, gender_test, stature_evidence
 from studio.fit.batch_session import batch_quality, gender_warning
 from studio.fit.errors import FitError
 from studio.fit.init import standing_pose
@@ -147,7 +147,7 @@ def test_gender_by_batch_reports_both_costs_and_the_margin(frames):
     assert test["winner"] == res.gender and len(test["per_frame"]) == 2
     assert np.mean(test["per_frame"]) == pytest.approx(res.margin, abs=1e-5) and test["margin"] == res.margin
     lo, hi = test["interval"]
-    assert lo < res.margin < hi and test["uncertain"] is (lo <= 0)
+    assert lo < res.margin < hi and test["uncertain"] is (lo <= 0 or res.margin < GENDER_MARGIN_FLOOR)
     # the default rule is the thesis' (§6.4.5): the lower batch cost wins, the stature evidence only reported
     assert GENDER_PRIOR_WEIGHT == 0.0 and res.gender == min(terms, key=lambda g: terms[g]["cost"])
 
@@ -256,6 +256,16 @@ def test_gender_test_is_a_paired_t_interval_over_the_frames():
     assert u["interval"][0] < 0 < u["interval"][1] and u["frames_for_winner"] == 3
     why = gender_warning(u)
     assert why.startswith("gender uncertain: female by 0.040 per frame, 95 % interval -") and "3 of 5 frames" in why
+    # every frame agreeing on a lead below the floor (GENDER_MARGIN_FLOOR): the interval clears 0,
+    # the decision is still uncertain, and the warning says why
+    small = female + np.array([0.02, 0.03, 0.01, 0.04, 0.02])
+    f = gender_test({"female": female, "male": small}, {"female": female.mean(), "male": small.mean()})
+    assert f["margin"] == pytest.approx(0.024) and f["interval"][0] > 0 and f["floor"] == GENDER_MARGIN_FLOOR == 0.05
+    assert f["uncertain"] is True and gender_warning(f) == (
+        "gender uncertain: female by 0.024 per frame, below the 0.050 the frames' agreement can vouch for "
+        "(5 of 5 frames favour female)")
+    assert gender_test({"female": female, "male": small}, {"female": female.mean(), "male": small.mean()},
+                       floor=0.02)["uncertain"] is False
     # a male winner: the differences are female − male
     m = gender_test({"female": male, "male": female}, {"female": male.mean(), "male": female.mean()})
     assert m["winner"] == "male" and np.array(m["per_frame"]) == pytest.approx(male - female)

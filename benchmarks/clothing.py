@@ -492,7 +492,8 @@ def table(args) -> int:
               f"(thesis {THESIS_GENDER['single']} / {THESIS_GENDER['vote']} / {THESIS_GENDER['batch']} %)"
               + (f"; batch by the cost alone {g['batch_cost_only']:.0f} %" if "batch_cost_only" in g else ""))
         if (u := s.get("gender_uncertain")) is not None:
-            print(f"gender flagged uncertain (95 % paired interval reaches 0, or margin below the floor): {u['flagged']} of {s['subjects']} "
+            print(f"gender flagged uncertain (95 % paired interval reaches 0, or margin below the floor): "
+                  f"{u['flagged']} of {s['subjects']} "
                   f"({u['wrong_flagged']} wrong, {u['right_flagged']} right); not flagged: {u['sure']}, "
                   f"{u['wrong_sure']} wrong")
         sk = s["skin"]

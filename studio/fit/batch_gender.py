@@ -16,7 +16,8 @@ import numpy as np
 from studio.cost import shape_prior
 from studio.fit.errors import FitError
 
-__all__ = ["GENDER_CONFIDENCE", "GENDER_MARGIN_FLOOR", "GENDER_PRIOR_WEIGHT", "gender_scores", "gender_test", "stature_evidence"]
+__all__ = ["GENDER_CONFIDENCE", "GENDER_MARGIN_FLOOR", "GENDER_PRIOR_WEIGHT", "gender_scores", "gender_test",
+           "stature_evidence"]
 
 #: Weight of the stature evidence against the batch cost per frame in the gender decision
 #: (:func:`gender_scores`); 0: the thesis' rule (§6.4.5), the lower batch cost wins, the stature

@@ -42,6 +42,8 @@ single-pose on every measurement, gender by batch ≥ 98 %.
     ... build --quick ; ... run --quick ; ... table
     # --clothing auto's coverage threshold: the loose batch body's share of the clothing pixels
     ... coverage --split dev --subjects 4 --poses 4
+    # the two-people flag: batches mixing each subject's frames with the next one's (after `run`)
+    ... pairs --subjects 20 --poses 11 --ledger ; ... pairs --split dev --cache dev-p4 --subjects 28 --poses 4
 """
 
 from __future__ import annotations
@@ -294,13 +296,14 @@ def run(args) -> int:
     return table(args)
 
 
-def keep_in_ledger(path: Path) -> None:
-    """Result file ``path`` copied into the ledger when ``--ledger`` is on (and it is not there already)."""
+def keep_in_ledger(path: Path, folder: str = "") -> None:
+    """Result file ``path`` copied into the ledger (its ``folder`` there) when ``--ledger`` is on
+    (and it is not there already)."""
     from rigs.atomic import atomic_write_bytes
 
     if not RUN["ledger"]:
         return
-    kept, data = LEDGER / RUN["name"] / path.name, path.read_bytes()
+    kept, data = LEDGER / RUN["name"] / folder / path.name, path.read_bytes()
     if not kept.is_file() or kept.read_bytes() != data:
         atomic_write_bytes(kept, data, mkdir=True)
 
@@ -511,9 +514,109 @@ def table(args) -> int:
     return 0
 
 
+def _pair_frames(frames: list[int], k: int) -> list[int]:
+    """At most ``k`` of a batch's ``frames``, spread evenly over them."""
+    idx = np.linspace(0, len(frames) - 1, min(k, len(frames))).round().astype(int)
+    return [frames[i] for i in dict.fromkeys(idx)]
+
+
+def _fit_pair(names: tuple[str, str], cond: str, rows: dict, k: int) -> dict:
+    """One batch over the batch frames of two subjects (at most ``k`` each; the first one's sex given)."""
+    from dataclasses import replace
+
+    from studio.fit import load_fits
+    from studio.fit.batch import BatchOptions, batch_fit
+    from studio.fit.batch_session import session_batch_frames
+    from studio.report.measurements import load_truth
+    from studio.workspace import Workspace
+
+    frames, people = [], []
+    for i, name in enumerate(names):
+        r = rows[f"{name}_{cond}"]
+        ws = Workspace.open(bench_root() / name / cond / "render" / "seed0")
+        chosen = _pair_frames(r["frames"], k)
+        fr, _ = session_batch_frames(ws, load_fits(ws, chosen), chosen)
+        frames += [replace(f, frame=100 * i + f.frame) for f in fr]  # the second subject's frames from 100
+        people.append({"subject": name, "sex": r["sex"], "stature_m": load_truth(ws.layout)["studio"]["stature"],
+                       "frames": chosen})
+    t = time.perf_counter()
+    res = batch_fit(frames, gender=people[0]["sex"], options=BatchOptions(clothing=cond))
+    return {"condition": cond, "people": people, "consistency": res.consistency,
+            "time_s": round(time.perf_counter() - t, 1)}
+
+
+def pairs(args) -> int:
+    """The two-people flag (§6.4.2) on batches that do mix two people: per condition, each subject's
+    batch frames (at most ``--pair-frames``, spread over them) with the next subject's (a ring: 0+1,
+    1+2, …, last+0), fitted as one batch with the first subject's sex given; flagged or not, by the
+    true stature difference, beside how many of `run`'s one-person batches this rule flags (on their
+    recorded cost ratios and single-frame statures, whatever code recorded them). Needs `run`'s
+    sessions and results; each pair cached with the fitting digest (``pairs/``, and the ledger's
+    ``pairs/`` under ``--ledger``); writes ``pairs.json``."""
+    from rigs.atomic import atomic_write_json
+    from studio.fit.batch import STATURE_SPREAD_FLAG, two_people
+    from studio.fit.units import fit_code_digest
+
+    code = fit_code_digest()
+    rows = {f"{r['subject']}_{r['condition']}": r for r in result_rows()}
+    summary = {}
+    for cond in args.conditions:
+        names = [p["name"] for p in subjects(args.subjects, args.poses, args.quick)
+                 if f"{p['name']}_{cond}" in rows]
+        if len(names) < 2:
+            print(f"{cond}: fewer than two subjects with results: run `run` first")
+            continue
+        ring = list(zip(names, names[1:] + names[:1]))[:len(names) if len(names) > 2 else 1]
+        records = []
+        for a, b in ring:
+            if args.only and int(a.rsplit("_", 1)[1]) not in args.only:
+                continue  # another process's pairs
+            path = bench_root() / "pairs" / f"{a}+{b}_{cond}.json"
+            kept = LEDGER / RUN["name"] / "pairs" / path.name
+            rec = next((json.loads(q.read_text()) for q in (path, kept) if q.is_file()), None)
+            if rec is None or rec.get("code") != code or rec.get("pair_frames") != args.pair_frames:
+                rec = _fit_pair((a, b), cond, rows, args.pair_frames) | {"code": code, "pair_frames": args.pair_frames}
+                atomic_write_json(path, rec, mkdir=True)
+                print(f"{a}+{b} {cond}: {'flagged' if rec['consistency']['flagged'] else 'not flagged'} "
+                      f"in {rec['time_s']:.0f} s", flush=True)
+            elif not path.is_file():
+                atomic_write_json(path, rec, mkdir=True)
+            keep_in_ledger(path, "pairs")
+            records.append(rec)
+        print(f"\n== {cond} clothing: batches of two people ({len(records)} pairs, at most {args.pair_frames} "
+              f"frames each; spread: of the single-frame statures without the farthest)")
+        print(f"{'pair':<16} {'sexes':>5} {'Δstature mm':>11} {'frames':>6} {'max ratio':>9} {'spread mm':>9}  flagged")
+        for rec in records:
+            a, b = rec["people"]
+            c = rec["consistency"]
+            d = 1000 * abs(a["stature_m"] - b["stature_m"])
+            print(f"{a['subject'] + '+' + b['subject'][-3:]:<16} {a['sex'][0].upper() + '+' + b['sex'][0].upper():>5} "
+                  f"{d:>11.0f} {len(c['cost_ratio']):>6} {max(c['cost_ratio'].values()):>9.2f} "
+                  f"{1000 * c.get('stature_spread_trimmed_m', c['stature_spread_m']):>9.0f}  "
+                  f"{'yes' if c['flagged'] else 'no'}")
+        gaps = [abs(r["people"][0]["stature_m"] - r["people"][1]["stature_m"]) for r in records]
+        far = [r["consistency"]["flagged"] for r, g in zip(records, gaps) if g >= STATURE_SPREAD_FLAG]
+        near = [r["consistency"]["flagged"] for r, g in zip(records, gaps) if g < STATURE_SPREAD_FLAG]
+        # the one-person batches of `run` judged by this code's rule on their recorded ratios and statures
+        one = [bool(two_people(list(c["cost_ratio"]), list(c["cost_ratio"].values()),
+                               list(c["single_statures_m"].values())))
+               for c in (rows[f"{n}_{cond}"]["batch"]["consistency"] for n in names)]
+        summary[cond] = {"pairs": len(records), "flagged": sum(far) + sum(near),
+                         "far": {"pairs": len(far), "flagged": sum(far)},
+                         "near": {"pairs": len(near), "flagged": sum(near)},
+                         "one_person": {"batches": len(one), "flagged": sum(one)}, "pair_frames": args.pair_frames,
+                         "records": records}
+        print(f"two people flagged: {sum(far) + sum(near)} of {len(records)} ({sum(far)} of {len(far)} differing by "
+              f">= {STATURE_SPREAD_FLAG * 1000:.0f} mm in stature, {sum(near)} of {len(near)} by less); one-person "
+              f"batches of `run` flagged by this rule: {sum(one)} of {len(one)}")
+    atomic_write_json(bench_root() / "pairs.json", summary)
+    print(f"\npairs: {bench_root() / 'pairs.json'}")
+    return 0
+
+
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("step", choices=["build", "run", "table", "coverage"])
+    ap.add_argument("step", choices=["build", "run", "table", "coverage", "pairs"])
     ap.add_argument("--subjects", type=int, default=20)
     ap.add_argument("--poses", type=int, default=11)
     ap.add_argument("--quick", action="store_true", help="2 subjects × 4 postures (overrides --subjects/--poses)")
@@ -521,7 +624,8 @@ def main(argv=None) -> int:
     ap.add_argument("--workers", type=int, default=2)
     ap.add_argument("--only", type=int, nargs="+", metavar="I",
                     help="run: these subjects only (indices below --subjects), e.g. a second process over the "
-                         "other half of the people: results are per subject, so two runs side by side do not collide")
+                         "other half of the people: results are per subject, so two runs side by side do not collide; "
+                         "pairs: the pairs these subjects lead")
     ap.add_argument("--cache", default=None, metavar="NAME",
                     help="the cache folder's name (default: full, or quick with --quick; dev- in front for the dev "
                          "split), e.g. another posture count than a cache was built with")
@@ -529,6 +633,8 @@ def main(argv=None) -> int:
                     help=f"also keep the results in {LEDGER.relative_to(ROOT)}/<cache>/ (commit them) and take "
                          "those of this fitting code from there: a run longer than one machine's life continues "
                          "on the next")
+    ap.add_argument("--pair-frames", type=int, default=4, metavar="K",
+                    help="pairs: at most this many of each subject's batch frames in a two-people batch")
     ap.add_argument("--real-skin", action="store_true", help="also the skin classifier on ../shared/data/skin")
     ap.add_argument("--split", choices=sorted(SPLIT_SEEDS), default="report",
                     help="report: seeds 2000+ (the reported figures); dev: seeds 3000+ (choose settings here)")
@@ -538,7 +644,9 @@ def main(argv=None) -> int:
     if args.only and not all(0 <= i < args.subjects for i in args.only):
         ap.error(f"--only: expected subject indices in 0..{args.subjects - 1}, got {args.only}")
     select_run(args.cache, args.quick, args.split, args.ledger)
-    return {"build": build, "run": run, "table": table, "coverage": coverage}[args.step](args)
+    if args.pair_frames < 1:
+        ap.error(f"--pair-frames: expected an integer >= 1, got {args.pair_frames}")
+    return {"build": build, "run": run, "table": table, "coverage": coverage, "pairs": pairs}[args.step](args)
 
 
 if __name__ == "__main__":

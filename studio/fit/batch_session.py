@@ -33,7 +33,7 @@ from studio.fit.errors import FitError
 from studio.fit.frame import FitOptions
 
 __all__ = ["TIGHT_RECALL", "batch_quality", "clothing_from_coverage", "fit_batch_session", "gender_warning",
-           "implausible_tight", "load_batch", "run_batch_command", "session_skin"]
+           "implausible_tight", "load_batch", "run_batch_command", "session_batch_frames", "session_skin"]
 
 log = logging.getLogger(__name__)
 
@@ -82,6 +82,30 @@ def session_skin(ws, fits, frames, cameras_of) -> tuple[dict, dict]:
         out[f] = masks
     info["source"] = "adapted" if classifier is not None else "segmentation"
     return out, info
+
+
+def session_batch_frames(ws, fits: dict, chosen: list[int], *,
+                         adapt_skin: bool = True) -> tuple[list[BatchFrame], dict]:
+    """The batch's frames ``chosen`` of a session (a Workspace) with single-frame fits ``fits``:
+    each frame's views that pass the mask screening (:func:`studio.fit.quality.screen_masks`), their
+    person masks, the skin (:func:`session_skin`; None without ``adapt_skin``) and the frame's
+    single fit as its start; and the skin's info."""
+    from studio.fit.quality import screen_masks
+
+    cameras_of = {}
+    for f in chosen:
+        dropped = set(screen_masks(ws.cameras, ws.person_masks(f))["dropped"])
+        cameras_of[f] = [c for c in ws.cameras if c.name not in dropped]
+    if adapt_skin:
+        skin, skin_info = session_skin(ws, fits, chosen, cameras_of)
+    else:
+        skin, skin_info = {f: None for f in chosen}, {"source": "none"}
+    frames = []
+    for f in chosen:
+        masks = dict(zip(ws.session.cameras, ws.person_masks(f), strict=True))
+        frames.append(BatchFrame(f, cameras_of[f], [masks[c.name] for c in cameras_of[f]], skin[f],
+                                 fits[f].pose, fits[f].shape, fits[f].gender))
+    return frames, skin_info
 
 
 def clothing_from_coverage(coverage: float, threshold: float = TIGHT_RECALL) -> str:
@@ -147,7 +171,6 @@ def fit_batch_session(
     from rigs.atomic import atomic_write_json
     from studio.body import BodyModel, measure
     from studio.execution import ExecutionError, open_runner
-    from studio.fit.quality import screen_masks
     from studio.fit.session import fit_session, load_fits, open_workspace
 
     if clothing not in ("auto", "tight", "loose"):
@@ -168,20 +191,7 @@ def fit_batch_session(
               else [f for f in cands if f in fits])
     if len(chosen) < 2:
         raise FitError(f"{ws.path}: fewer than two fitted frames for the batch ({chosen})")
-    cameras_of = {}
-    for f in chosen:
-        masks = ws.person_masks(f)
-        dropped = set(screen_masks(ws.cameras, masks)["dropped"])
-        cameras_of[f] = [c for c in ws.cameras if c.name not in dropped]
-    if adapt_skin:
-        skin, skin_info = session_skin(ws, fits, chosen, cameras_of)
-    else:
-        skin, skin_info = {f: None for f in chosen}, {"source": "none"}
-    batch_frames = []
-    for f in chosen:
-        masks = dict(zip(ws.session.cameras, ws.person_masks(f), strict=True))
-        batch_frames.append(BatchFrame(f, cameras_of[f], [masks[c.name] for c in cameras_of[f]], skin[f],
-                                       fits[f].pose, fits[f].shape, fits[f].gender))
+    batch_frames, skin_info = session_batch_frames(ws, fits, chosen, adapt_skin=adapt_skin)
     decided = {}
     try:
         with open_runner(min(workers, len(chosen)), scheduler) as runner:

@@ -7,9 +7,11 @@ from studio.body import BodyModel, measure
 from studio.body.skeleton import pose_slices
 from studio.fit import FitOptions, fit_frame
 from studio.fit.frame import build_targets
-from studio.fit.batch import BatchFrame, BatchOptions, batch_fit, convert_shape, on_floor
+from studio.fit.batch import (FLAG_FRAMES, BatchFrame, BatchOptions, batch_fit, convert_shape, on_floor,
+                              trimmed_spread, two_people)
 from studio.fit.batch_frames import choose_frames
-from studio.fit.batch_gender import GENDER_MARGIN_FLOOR, GENDER_PRIOR_WEIGHT, gender_scores, gender_test, stature_evidence
+from studio.fit.batch_gender import (GENDER_MARGIN_FLOOR, GENDER_PRIOR_WEIGHT, gender_scores, gender_test,
+                                     stature_evidence)
 from studio.fit.batch_session import batch_quality, gender_warning
 from studio.fit.errors import FitError
 from studio.fit.init import standing_pose
@@ -123,6 +125,37 @@ def test_a_batch_mixing_two_people_is_flagged(frames):
     assert cons["flagged"], cons
     assert cons["stature_spread_m"] > 0.1
     assert any("spread" in r or "shared shape costs" in r for r in cons["reasons"])
+
+
+def test_two_people_needs_the_evidence_of_two_frames():
+    """One failed single-frame fit among eleven (its stature 300 mm off, the shared shape costing it
+    1.9× its own: a loose-clothed frame) is not a second person; two frames are (FLAG_FRAMES)."""
+    labels = list(range(11))
+    ratios = np.array([0.6, 0.7, 0.5, 0.8, 0.9, 1.9, 0.6, 0.7, 0.8, 0.5, 0.6])
+    statures = np.full(11, 1.70) + np.linspace(-0.01, 0.01, 11)
+    statures[5] = 2.00
+    assert FLAG_FRAMES == 2 and trimmed_spread(statures) == pytest.approx(0.02)
+    assert two_people(labels, ratios, statures) == []
+    # the same outlier twice: both reasons, the frames worst first
+    r2, s2 = ratios.copy(), statures.copy()
+    r2[[5, 8]], s2[8] = [1.9, 2.4], 1.95
+    assert two_people(labels, r2, s2) == [
+        "frames 8, 5: the shared shape costs 2.40x, 1.90x their own single-frame shapes (> 1.6 on 2 or more)",
+        "single-frame statures spread 260 mm without the farthest frame (> 60 mm) and the shared shape explains "
+        "2 frames worse than their own"]
+    # a spread the shared shape explains better than the frames' own shapes is their fits' error
+    s3 = statures.copy()
+    s3[:5] = 1.60
+    assert trimmed_spread(s3) == pytest.approx(0.11) and two_people(labels, ratios, s3) == []
+    r3 = ratios.copy()
+    r3[[0, 1]] = 1.05
+    assert two_people(labels, r3, s3) == ["single-frame statures spread 110 mm without the farthest frame "
+                                          "(> 60 mm) and the shared shape explains 3 frames worse than their own"]
+    # a batch of two frames: both must agree; nothing is left out of its spread
+    assert trimmed_spread([1.6, 1.75]) == pytest.approx(0.15)
+    assert two_people([0, 1], [1.7, 1.8], [1.6, 1.61]) == [
+        "frames 1, 0: the shared shape costs 1.80x, 1.70x their own single-frame shapes (> 1.6 on 2 or more)"]
+    assert two_people([0, 1], [1.7, 0.9], [1.6, 1.75]) == []
 
 
 def test_gender_by_batch_reports_both_costs_and_the_margin(frames):

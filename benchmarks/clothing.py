@@ -554,7 +554,7 @@ def pairs(args) -> int:
     sessions and results; each pair cached with the fitting digest (``pairs/``, and the ledger's
     ``pairs/`` under ``--ledger``); writes ``pairs.json``."""
     from rigs.atomic import atomic_write_json
-    from studio.fit.batch import STATURE_SPREAD_FLAG, two_people
+    from studio.fit.batch_frames import STATURE_SPREAD_FLAG, two_people
     from studio.fit.units import fit_code_digest
 
     code = fit_code_digest()

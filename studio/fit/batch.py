@@ -30,8 +30,9 @@ below :data:`~studio.fit.batch_gender.GENDER_MARGIN_FLOOR` whatever the interval
 
 **Consistency** (§6.4.2: shape varies little with pose, much across people): the frames' own
 single-frame bodies and the batch body are scored by the same cost; when the shared shape
-explains some frame much worse than that frame's own shape, or the single-frame measurements
-spread far more than pose and fitting noise do for one person, the batch is flagged.
+explains two frames much worse than their own shapes, or the single-frame statures (one outlying
+frame left out) spread far more than pose and fitting noise do for one person, the batch is
+flagged (:func:`studio.fit.batch_frames.consistency`).
 """
 
 from __future__ import annotations
@@ -46,6 +47,7 @@ import numpy as np
 from studio.body import BodyModel
 from studio.body.skeleton import POSE_SIZE
 from studio.cost import shape_prior
+from studio.fit.batch_frames import consistency
 from studio.fit.batch_gender import gender_scores, gender_test
 from studio.fit.batch_terms import (KNEE_INDICES, BatchOptions, ClothedObjective, build_prior,
                                     clothing_residuals, clothing_targets, on_floor, shrink_build,
@@ -56,29 +58,9 @@ from studio.fit.objective import parameter_box, pose_bounds
 from studio.optimize import Stage, staged_nelder_mead
 
 __all__ = ["BatchFrame", "BatchOptions", "BatchResult", "ClothedObjective", "batch_fit", "compare_genders",
-           "convert_shape", "consistency", "start_shape", "trimmed_spread", "two_people", "clothing_targets",
-           "on_floor", "pose_polish", "pose_step"]
+           "convert_shape", "start_shape", "clothing_targets", "on_floor", "pose_polish", "pose_step"]
 
 log = logging.getLogger(__name__)
-
-#: Flag a batch when the shared shape costs ``FLAG_FRAMES`` frames this many times their own
-#: single-frame shapes …
-COST_RATIO_FLAG = 1.6
-#: … or the single-frame statures, one outlying frame left out, spread (max − min) more than this
-#: (m) while the shared shape explains ``FLAG_FRAMES`` frames worse than their own. Within one person
-#: the single-frame fits of the held-out benchmark spread about ±15 mm; two adults differ by ~70 mm
-#: on average.
-STATURE_SPREAD_FLAG = 0.06
-#: Frames that must bear the evidence (all of them in a smaller batch): one frame is not told from one
-#: failed single-frame fit. Under loose clothing the single fits are of the clothes and one of 11
-#: often fails (its stature 100–350 mm off, the shared shape costing it 1.7–2.0× its own): taking
-#: any one frame's evidence, 6 of 20 one-person loose batches of the clothing ledger were flagged as
-#: two people. Chosen on the dev split (4 postures, at most 4 frames a person, gender given; the
-#: ring of `benchmarks/clothing.py pairs --split dev` and 10 pairs picked to span 15–272 mm of
-#: stature): loose one-person batches flagged 1 → 0 of 10, tight 0 → 0 of 21; loose batches of two
-#: people differing by ≥ 60 mm in stature 12 → 12 of 13, by less 2 → 1 of 7.
-FLAG_FRAMES = 2
-
 
 @dataclass(frozen=True, eq=False)
 class BatchFrame:
@@ -300,71 +282,6 @@ class BatchResult:
             "settings": self.options,
             "timings": self.timings,
         }
-
-
-def consistency(batch_model: BodyModel, shape: np.ndarray, poses: np.ndarray, frames: list[BatchFrame],
-                options: BatchOptions) -> dict:
-    """How well one shape explains every frame (§6.4.2): each frame scored at the final level by
-    the same clothing cost with the batch body and with the frame's own single-frame body, and the
-    single-frame statures; ``flagged`` with the reasons when the frames look like more than one
-    person (:func:`two_people`)."""
-    from studio.body import measure
-
-    level = options.levels[-1]
-    ratios, statures = [], []
-    for f, pose in zip(frames, poses, strict=True):
-        targets = clothing_targets(f, options)
-        own_model = BodyModel.load(f.gender)
-        own = ClothedObjective(own_model, f.cameras, targets, f.shape, 0, options.prior_weight, floor=options.stands)
-        mine = ClothedObjective(batch_model, f.cameras, targets, shape, 0, options.prior_weight, floor=options.stands)
-        c_own = float(own(own.pack(f.shape, f.pose)[None], level)[0])
-        c_batch = float(mine(mine.pack(shape, pose)[None], level)[0])
-        ratios.append(c_batch / max(c_own, 1e-9))
-        statures.append(measure(own_model, f.shape)["stature"])
-    labels = [f.frame for f in frames]
-    reasons = two_people(labels, ratios, statures)
-    return {"cost_ratio": {str(k): round(r, 4) for k, r in zip(labels, ratios, strict=True)},
-            "single_statures_m": {str(k): round(s, 4) for k, s in zip(labels, statures, strict=True)},
-            "stature_spread_m": round(float(np.ptp(statures)), 4) if statures else 0.0,
-            "stature_spread_trimmed_m": round(trimmed_spread(statures), 4), "flagged": bool(reasons),
-            "reasons": reasons, "thresholds": {"cost_ratio": COST_RATIO_FLAG, "stature_spread_m": STATURE_SPREAD_FLAG,
-                                               "frames": FLAG_FRAMES}}
-
-
-def two_people(labels, ratios, statures) -> list[str]:
-    """Why frames ``labels`` look like more than one person (§6.4.2), from each frame's cost
-    ratio (shared shape / its own single-frame shape) and single-frame stature (m); empty: one
-    person. The evidence must come from ``FLAG_FRAMES`` frames (all, in a smaller batch): the
-    ratio over ``COST_RATIO_FLAG`` on that many, or the :func:`trimmed_spread` of the statures over
-    ``STATURE_SPREAD_FLAG`` while that many frames are explained worse by the shared shape than by
-    their own (ratio > 1) — when the shared shape explains the frames at least as well, a spread
-    is the single-frame fits' own error (a poor single fit, not a second person)."""
-    ratios = np.asarray(ratios, dtype=np.float64)
-    need = min(FLAG_FRAMES, ratios.size)
-    order = np.argsort(ratios)[::-1]
-    over = [i for i in order if ratios[i] > COST_RATIO_FLAG]
-    worse = int((ratios > 1.0).sum())
-    trimmed = trimmed_spread(statures)
-    reasons = []
-    if over and len(over) >= need:
-        reasons.append(f"frames {', '.join(str(labels[i]) for i in over)}: the shared shape costs "
-                       f"{', '.join(f'{ratios[i]:.2f}x' for i in over)} their own single-frame shapes "
-                       f"(> {COST_RATIO_FLAG} on {need} or more)")
-    if trimmed > STATURE_SPREAD_FLAG and worse and worse >= need:
-        left_out = " without the farthest frame" if len(statures) >= 3 else ""
-        reasons.append(f"single-frame statures spread {trimmed * 1000:.0f} mm{left_out} (> "
-                       f"{STATURE_SPREAD_FLAG * 1000:.0f} mm) and the shared shape explains {worse} frames worse "
-                       f"than their own")
-    return reasons
-
-
-def trimmed_spread(values) -> float:
-    """max − min of ``values`` without the one farthest from their median (all of them when
-    there are fewer than three): one failed single-frame fit does not make a spread."""
-    v = np.asarray(values, dtype=np.float64)
-    if v.size < 3:
-        return float(np.ptp(v)) if v.size else 0.0
-    return float(np.ptp(np.delete(v, np.argmax(np.abs(v - np.median(v))))))
 
 
 class GenderFit(NamedTuple):

@@ -7,9 +7,8 @@ from studio.body import BodyModel, measure
 from studio.body.skeleton import pose_slices
 from studio.fit import FitOptions, fit_frame
 from studio.fit.frame import build_targets
-from studio.fit.batch import (FLAG_FRAMES, BatchFrame, BatchOptions, batch_fit, convert_shape, on_floor,
-                              trimmed_spread, two_people)
-from studio.fit.batch_frames import choose_frames
+from studio.fit.batch import BatchFrame, BatchOptions, batch_fit, convert_shape, on_floor
+from studio.fit.batch_frames import FLAG_FRAMES, choose_frames, trimmed_spread, two_people
 from studio.fit.batch_gender import (GENDER_MARGIN_FLOOR, GENDER_PRIOR_WEIGHT, gender_scores, gender_test,
                                      stature_evidence)
 from studio.fit.batch_session import batch_quality, gender_warning

@@ -93,10 +93,29 @@ def select_run(cache: str | None, quick: bool, split: str, ledger: bool) -> None
     RUN["ledger"] = ledger
 
 
+def cache_arguments(ap: argparse.ArgumentParser) -> argparse.ArgumentParser:
+    """The options of a script that reads this benchmark's cache (``clothing_parts.py``,
+    ``clothing_pixel.py``); :func:`select_run` then takes them."""
+    ap.add_argument("--subjects", type=int, default=20)
+    ap.add_argument("--poses", type=int, default=11)
+    ap.add_argument("--quick", action="store_true", help="the quick cache (2 subjects × 4 postures)")
+    ap.add_argument("--cache", default=None, metavar="NAME", help="as clothing.py's --cache")
+    ap.add_argument("--split", choices=sorted(SPLIT_SEEDS), default="report")
+    ap.add_argument("--ledger", action="store_true", help="take the results kept in the ledger too")
+    return ap
+
+
 def bench_root() -> Path:
     from studio.simulate.samples import cache_root
 
     return cache_root() / "bench" / "clothing" / RUN["name"]
+
+
+def rendered_session(name: str, condition: str):
+    """The workspace of subject ``name``'s rendered session in ``condition`` (written by `run`)."""
+    from studio.workspace import Workspace
+
+    return Workspace.open(bench_root() / name / condition / "render" / "seed0")
 
 
 def subjects(n: int, n_poses: int, quick: bool) -> list[dict]:
@@ -377,9 +396,7 @@ def _loose_stature_error_mm(batch: dict, true_stature: float) -> float:
 def session_batch(r: dict):
     """(workspace, ``fit/batch.json`` content) of result ``r``'s session on this machine; stops with the
     path when the session's batch is missing or not the result's (other frames or gender)."""
-    from studio.workspace import Workspace
-
-    ws = Workspace.open(bench_root() / r["subject"] / r["condition"] / "render" / "seed0")
+    ws = rendered_session(r["subject"], r["condition"])
     path = ws.layout.fit_dir / "batch.json"
     if not path.is_file():
         raise SystemExit(f"{path}: missing; run `clothing.py run` for {r['subject']} {r['condition']} first")
@@ -528,12 +545,11 @@ def _fit_pair(names: tuple[str, str], cond: str, rows: dict, k: int) -> dict:
     from studio.fit.batch import BatchOptions, batch_fit
     from studio.fit.batch_session import session_batch_frames
     from studio.report.measurements import load_truth
-    from studio.workspace import Workspace
 
     frames, people = [], []
     for i, name in enumerate(names):
         r = rows[f"{name}_{cond}"]
-        ws = Workspace.open(bench_root() / name / cond / "render" / "seed0")
+        ws = rendered_session(name, cond)
         chosen = _pair_frames(r["frames"], k)
         fr, _ = session_batch_frames(ws, load_fits(ws, chosen), chosen)
         frames += [replace(f, frame=100 * i + f.frame) for f in fr]  # the second subject's frames from 100
@@ -552,14 +568,16 @@ def pairs(args) -> int:
     true stature difference, beside how many of `run`'s one-person batches this rule flags (on their
     recorded cost ratios and single-frame statures, whatever code recorded them). Needs `run`'s
     sessions and results; each pair cached with the fitting digest (``pairs/``, and the ledger's
-    ``pairs/`` under ``--ledger``); writes ``pairs.json``."""
+    ``pairs/`` under ``--ledger``); writes ``pairs.json`` (the summaries of this call's conditions; other
+    conditions' kept from the previous file)."""
     from rigs.atomic import atomic_write_json
     from studio.fit.batch_frames import STATURE_SPREAD_FLAG, two_people
     from studio.fit.units import fit_code_digest
 
     code = fit_code_digest()
     rows = {f"{r['subject']}_{r['condition']}": r for r in result_rows()}
-    summary = {}
+    out = bench_root() / "pairs.json"
+    summary = json.loads(out.read_text()) if out.is_file() else {}  # other conditions' summaries stay
     for cond in args.conditions:
         names = [p["name"] for p in subjects(args.subjects, args.poses, args.quick)
                  if f"{p['name']}_{cond}" in rows]
@@ -609,8 +627,8 @@ def pairs(args) -> int:
         print(f"two people flagged: {sum(far) + sum(near)} of {len(records)} ({sum(far)} of {len(far)} differing by "
               f">= {STATURE_SPREAD_FLAG * 1000:.0f} mm in stature, {sum(near)} of {len(near)} by less); one-person "
               f"batches of `run` flagged by this rule: {sum(one)} of {len(one)}")
-    atomic_write_json(bench_root() / "pairs.json", summary)
-    print(f"\npairs: {bench_root() / 'pairs.json'}")
+    atomic_write_json(out, summary)
+    print(f"\npairs: {out}")
     return 0
 
 

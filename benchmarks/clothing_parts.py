@@ -111,13 +111,8 @@ def main(argv=None) -> int:
 
     from rigs.atomic import atomic_write_json
 
-    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("--subjects", type=int, default=20)
-    ap.add_argument("--poses", type=int, default=11)
-    ap.add_argument("--quick", action="store_true", help="the quick cache (2 subjects × 4 postures)")
-    ap.add_argument("--cache", default=None, metavar="NAME", help="as clothing.py's --cache")
-    ap.add_argument("--split", choices=sorted(clothing.SPLIT_SEEDS), default="report")
-    ap.add_argument("--ledger", action="store_true", help="take the results kept in the ledger too")
+    ap = clothing.cache_arguments(argparse.ArgumentParser(description=__doc__,
+                                                          formatter_class=argparse.RawDescriptionHelpFormatter))
     ap.add_argument("--conditions", nargs="+", default=["tight", "loose"], choices=["tight", "loose"])
     args = ap.parse_args(argv)
     clothing.select_run(args.cache, args.quick, args.split, args.ledger)

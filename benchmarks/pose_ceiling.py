@@ -52,17 +52,18 @@ GROUPS = {"head": ("head",), "torso": ("pelvis", "torso"), "arms": ("upperarm", 
 
 
 def fit_to_mesh(model, target: np.ndarray, shape0: np.ndarray, pose0: np.ndarray, k: int,
-                max_nfev: int = 60) -> tuple[np.ndarray, np.ndarray]:
-    """Pose (30,) and shape (first ``k`` coefficients free, the rest 0) minimising
-    Σ‖V(β, θ) − target‖² over the vertices (eq. 3.23 bodies; trust-region least squares with
-    a finite-difference Jacobian computed as one batch of bodies)."""
+                max_nfev: int = 60, keep_tail: bool = False) -> tuple[np.ndarray, np.ndarray]:
+    """Pose (30,) and shape (first ``k`` coefficients free, the rest 0 — or ``shape0``'s with
+    ``keep_tail``: ``k`` = 0 then poses the body of ``shape0``) minimising Σ‖V(β, θ) − target‖²
+    over the vertices (eq. 3.23 bodies; trust-region least squares with a finite-difference
+    Jacobian computed as one batch of bodies)."""
     from scipy.optimize import least_squares
 
     n = model.pose_size
     lo = np.concatenate([model.pose_limits[:, 0], -4 * np.sqrt(model.eigenvalues[:k])])
     hi = np.concatenate([model.pose_limits[:, 1], 4 * np.sqrt(model.eigenvalues[:k])])
     x0 = np.clip(np.concatenate([pose0, shape0[:k]]), lo + 1e-9, hi - 1e-9)
-    tail = np.zeros(model.n_shape - k)
+    tail = np.asarray(shape0, dtype=np.float64)[k:] if keep_tail else np.zeros(model.n_shape - k)
 
     def bodies(X):
         S = np.concatenate([X[:, n:], np.broadcast_to(tail, (len(X), len(tail)))], axis=1)

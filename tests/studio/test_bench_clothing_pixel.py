@@ -1,0 +1,42 @@
+"""benchmarks/clothing_pixel.py: the true body taken into the model (its shape, then each frame's pose by
+pose_ceiling.fit_to_mesh with the shape kept) and a pixel's size."""
+
+import sys
+from pathlib import Path
+from types import SimpleNamespace
+
+import numpy as np
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[2] / "benchmarks"))
+
+import clothing_pixel  # noqa: E402
+import pose_ceiling  # noqa: E402
+
+
+def test_a_model_body_is_recovered_as_its_shape_and_pose():
+    from studio.body import BodyModel
+
+    model = BodyModel.load("female")
+    sig = np.sqrt(model.eigenvalues)
+    shape = np.random.default_rng(3).uniform(-1.5, 1.5, model.n_shape) * sig
+    rest = model.vertices(shape, model.default_pose()) + np.array([0.1, -0.2, 0.05])  # anywhere in the room
+    got, rms = clothing_pixel.model_space_truth(model, rest)
+    assert rms < 1e-4  # 0.1 mm: the default-pose body is linear in the coefficients up to float32 rounding
+    assert np.max(np.abs(got - shape) / sig) < 0.01
+
+    lo, hi = model.pose_limits[:, 0], model.pose_limits[:, 1]
+    pose = np.clip(model.default_pose() + 0.2, lo, hi)  # every joint bent, the root turned and moved
+    target = model.vertices(shape, pose)
+    start = np.clip(pose + np.random.default_rng(4).normal(0, 0.05, pose.size), lo, hi)  # as a single fit's pose
+    kept, found = pose_ceiling.fit_to_mesh(model, target, shape, start, 0, max_nfev=300, keep_tail=True)
+    assert np.array_equal(kept, shape)
+    err = np.sqrt(np.mean(np.sum((model.vertices(shape, found) - target) ** 2, axis=1)))
+    start_err = np.sqrt(np.mean(np.sum((model.vertices(shape, start) - target) ** 2, axis=1)))
+    assert start_err > 0.01  # the start is 1 cm or more away
+    assert err < 1e-5  # 0.01 mm: found exactly (a step the float32 body resolves)
+
+
+def test_a_pixel_at_the_person():
+    cam = SimpleNamespace(K=np.diag([500.0, 500.0, 1.0]), R=np.eye(3), t=np.array([0.0, 0.0, 4.0]))
+    # the camera's centre is at (0, 0, -4): 5 m from (0, 0, 1), 5 m / 500 px = 10 mm
+    assert clothing_pixel.mm_per_pixel([cam]) == 10.0

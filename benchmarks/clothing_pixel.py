@@ -51,6 +51,14 @@ def model_space_truth(model, rest: np.ndarray) -> tuple[np.ndarray, float]:
     return shape, rms
 
 
+def finer_cameras(cameras, scale: int) -> list:
+    """``cameras`` with ``scale`` × as many pixels each way (the inverse of :func:`studio.render.pyramid.level_camera`:
+    pixel centres at ``scale · x + (scale − 1) / 2``)."""
+    A = np.array([[scale, 0.0, (scale - 1) / 2], [0.0, scale, (scale - 1) / 2], [0.0, 0.0, 1.0]])
+    return [c.replace(K=A @ np.asarray(c.K, dtype=np.float64), size=(int(c.size[0]) * scale, int(c.size[1]) * scale))
+            for c in cameras]
+
+
 def mm_per_pixel(cameras, point=(0.0, 0.0, 1.0)) -> float:
     """Mean over ``cameras`` of the size (mm) of one pixel at ``point`` (world, m): distance / focal length."""
     out = []
@@ -60,9 +68,10 @@ def mm_per_pixel(cameras, point=(0.0, 0.0, 1.0)) -> float:
     return float(np.mean(out))
 
 
-def subject_pixel(r: dict) -> dict:
-    """One tight result's subject on model-rendered masks: the batch's and the single fits' errors (mm) against
-    the model-space truth, the batch's cost per frame, the registration's rms."""
+def subject_pixel(r: dict, scale: int = 1) -> dict:
+    """One tight result's subject on model-rendered masks (in the session's cameras, or with ``scale`` × finer
+    pixels: :func:`finer_cameras`): the batch's and the single fits' errors (mm) against the model-space truth,
+    the batch's cost per frame, the registration's rms."""
     from studio.body import BodyModel, anny_correspondence, measure
     from studio.fit import load_fits
     from studio.fit.batch import BatchFrame, BatchOptions, batch_fit
@@ -71,6 +80,7 @@ def subject_pixel(r: dict) -> dict:
     from studio.render import silhouette
 
     ws = clothing.rendered_session(r["subject"], "tight")
+    cameras = finer_cameras(ws.cameras, scale) if scale > 1 else ws.cameras
     model = BodyModel.load(r["sex"])
     with np.load(clothing.bench_root() / r["subject"] / "body.npz") as z:
         rest = anny_correspondence() @ (z["rest_q"].astype(np.float64) * float(z["scale"]))
@@ -88,13 +98,13 @@ def subject_pixel(r: dict) -> dict:
         _, pose = fit_to_mesh(model, Vt, shape, fits[f].pose, 0, max_nfev=300, keep_tail=True)
         V = model.vertices(shape, pose)
         rms.append(1000 * float(np.sqrt(np.mean(np.sum((V - Vt) ** 2, axis=1)))))
-        masks = [silhouette(c, V, model.faces) for c in ws.cameras]
-        fit = fit_frame(model, ws.cameras, masks, frame=f)
+        masks = [silhouette(c, V, model.faces) for c in cameras]
+        fit = fit_frame(model, cameras, masks, frame=f)
         singles.append(errors(fit.shape))
-        frames.append(BatchFrame(f, ws.cameras, masks, None, fit.pose, fit.shape, fit.gender))
+        frames.append(BatchFrame(f, cameras, masks, None, fit.pose, fit.shape, fit.gender))
     t = time.perf_counter()
     res = batch_fit(frames, gender=r["sex"], options=BatchOptions(clothing="tight"))
-    return {"sex": r["sex"], "mm_per_px": mm_per_pixel(ws.cameras), "rest_rms_mm": 1000 * rest_rms,
+    return {"sex": r["sex"], "mm_per_px": mm_per_pixel(cameras), "rest_rms_mm": 1000 * rest_rms,
             "pose_rms_mm": rms, "batch": errors(res.shape), "single": singles,
             "batch_cost_per_frame": [float(c) for c in res.costs],
             "batch_time_s": time.perf_counter() - t,
@@ -124,14 +134,18 @@ def main(argv=None) -> int:
 
     ap = clothing.cache_arguments(argparse.ArgumentParser(description=__doc__,
                                                           formatter_class=argparse.RawDescriptionHelpFormatter))
+    ap.add_argument("--scale", type=int, default=1, metavar="S",
+                    help="cameras with S times as many pixels each way (finer pixels, the same lenses)")
     args = ap.parse_args(argv)
+    if args.scale < 1:
+        ap.error(f"--scale: expected an integer >= 1, got {args.scale}")
     clothing.select_run(args.cache, args.quick, args.split, args.ledger)
     names = {p["name"] for p in clothing.subjects(args.subjects, args.poses, args.quick)}
     rows = [r for r in clothing.result_rows() if r["condition"] == "tight" and r["subject"] in names]
     if not rows:
         print("no tight results yet: run `clothing.py build` then `clothing.py run`")
         return 1
-    out = {r["subject"]: subject_pixel(r) for r in track(rows, description="fits on model-rendered masks")}
+    out = {r["subject"]: subject_pixel(r, args.scale) for r in track(rows, description="fits on model-rendered masks")}
     short = ("stature", "chest", "waist", "hip")
     print(f"{'tight, error mm':<18} {'mm/px':>5}  {'batch on model masks':>27}  {'single mean |err|':>23}  "
           f"{'real masks: batch':>23}  {'single mean |err|':>23}")
@@ -150,8 +164,8 @@ def main(argv=None) -> int:
         print(f"{k.split('_')[0]:<10} {v['batch']['mean_abs']:>11.1f} ({v['batch']['mean']:+5.1f}) "
               f"{v['single']['mean_abs']:>7.1f} ({v['single']['mean']:+5.1f}) {v['real_batch_abs']:>18.1f} "
               f"{v['real_single_abs']:>7.1f}")
-    path = clothing.bench_root() / "pixel.json"
-    atomic_write_json(path, {"measures": MEASURES, "summary": summary, "per_subject": out})
+    path = clothing.bench_root() / ("pixel.json" if args.scale == 1 else f"pixel_x{args.scale}.json")
+    atomic_write_json(path, {"measures": MEASURES, "scale": args.scale, "summary": summary, "per_subject": out})
     print(f"pixel: {path}")
     return 0
 

@@ -1,5 +1,5 @@
 """benchmarks/clothing_pixel.py: the true body taken into the model (its shape, then each frame's pose by
-pose_ceiling.fit_to_mesh with the shape kept) and a pixel's size."""
+pose_ceiling.fit_to_mesh with the shape kept), finer cameras and a pixel's size."""
 
 import sys
 from pathlib import Path
@@ -40,3 +40,18 @@ def test_a_pixel_at_the_person():
     cam = SimpleNamespace(K=np.diag([500.0, 500.0, 1.0]), R=np.eye(3), t=np.array([0.0, 0.0, 4.0]))
     # the camera's centre is at (0, 0, -4): 5 m from (0, 0, 1), 5 m / 500 px = 10 mm
     assert clothing_pixel.mm_per_pixel([cam]) == 10.0
+
+
+def test_finer_cameras_undo_a_pyramid_level():
+    """Cameras with twice the pixels, taken one pyramid level down, are the cameras again."""
+    from calibration.camera import Camera
+    from studio.render.pyramid import level_camera
+
+    K = np.array([[563.2, 0.0, 327.1], [0.0, 562.8, 244.6], [0.0, 0.0, 1.0]])
+    cam = Camera(name="c", K=K, dist=np.zeros(5), R=np.eye(3), t=np.array([0.0, 0.0, 4.0]), size=(656, 490))
+    (fine,) = clothing_pixel.finer_cameras([cam], 2)
+    assert tuple(fine.size) == (1312, 980)
+    back = level_camera(fine, 1)
+    assert tuple(back.size) == (656, 490)
+    np.testing.assert_allclose(back.K, K, atol=1e-12)
+    assert abs(clothing_pixel.mm_per_pixel([fine]) - clothing_pixel.mm_per_pixel([cam]) / 2) < 1e-9

@@ -61,11 +61,7 @@ def finer_cameras(cameras, scale: int) -> list:
 
 def mm_per_pixel(cameras, point=(0.0, 0.0, 1.0)) -> float:
     """Mean over ``cameras`` of the size (mm) of one pixel at ``point`` (world, m): distance / focal length."""
-    out = []
-    for c in cameras:
-        centre = -np.asarray(c.R, dtype=np.float64).T @ np.asarray(c.t, dtype=np.float64).ravel()
-        out.append(1000 * np.linalg.norm(centre - np.asarray(point)) / float(np.asarray(c.K)[0, 0]))
-    return float(np.mean(out))
+    return float(np.mean([1000 * np.linalg.norm(c.center - np.asarray(point)) / float(c.K[0, 0]) for c in cameras]))
 
 
 def subject_pixel(r: dict, scale: int = 1) -> dict:

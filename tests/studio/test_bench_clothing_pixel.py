@@ -3,7 +3,6 @@ pose_ceiling.fit_to_mesh with the shape kept), finer cameras and a pixel's size.
 
 import sys
 from pathlib import Path
-from types import SimpleNamespace
 
 import numpy as np
 
@@ -37,7 +36,10 @@ def test_a_model_body_is_recovered_as_its_shape_and_pose():
 
 
 def test_a_pixel_at_the_person():
-    cam = SimpleNamespace(K=np.diag([500.0, 500.0, 1.0]), R=np.eye(3), t=np.array([0.0, 0.0, 4.0]))
+    from calibration.camera import Camera
+
+    cam = Camera(name="c", K=np.diag([500.0, 500.0, 1.0]), dist=np.zeros(5), R=np.eye(3), t=np.array([0.0, 0.0, 4.0]),
+                 size=(656, 490))
     # the camera's centre is at (0, 0, -4): 5 m from (0, 0, 1), 5 m / 500 px = 10 mm
     assert clothing_pixel.mm_per_pixel([cam]) == 10.0
 

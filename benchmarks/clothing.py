@@ -76,19 +76,23 @@ THESIS_GENDER = {"single": 86.0, "vote": 90.6, "batch": 94.3}
 
 #: ``full`` or ``quick`` (set by ``--quick``), ``dev-`` in front for the dev split: separate caches;
 #: ``ledger``: also keep the results in the repository (``--ledger``).
-RUN = {"name": "full", "first_seed": FIRST_SEED, "ledger": False}
+RUN = {"name": "full", "first_seed": FIRST_SEED, "ledger": False, "pixels": 1}
 #: Results kept in the repository, per cache name: the full run takes longer than a machine of ours
 #: lives (about 3.5 h on 2 cores), so each machine commits the subjects it finished and the next
 #: one, with the same fitting code, continues from them (``run --ledger``; ``table --ledger``).
 LEDGER = ROOT / "benchmarks" / "ledger" / "clothing"
 
 
-def select_run(cache: str | None, quick: bool, split: str, ledger: bool) -> None:
+def select_run(cache: str | None, quick: bool, split: str, ledger: bool, pixels: int = 1) -> None:
     """Set :data:`RUN` from the command line: the cache's name (``cache``, else ``quick`` or
-    ``full``; ``<split>-`` in front off the report split), the split's first seed, the ledger."""
+    ``full``; ``<split>-`` in front off the report split, ``-x<pixels>`` behind on a finer rig),
+    the split's first seed, the ledger, the rig's pixels."""
     RUN["name"] = cache or ("quick" if quick else "full")
     if split != "report":
         RUN["name"] = f"{split}-{RUN['name']}"
+    if pixels != 1:
+        RUN["name"] = f"{RUN['name']}-x{pixels}"
+    RUN["pixels"] = pixels
     RUN["first_seed"] = SPLIT_SEEDS[split]
     RUN["ledger"] = ledger
 
@@ -102,6 +106,7 @@ def cache_arguments(ap: argparse.ArgumentParser) -> argparse.ArgumentParser:
     ap.add_argument("--cache", default=None, metavar="NAME", help="as clothing.py's --cache")
     ap.add_argument("--split", choices=sorted(SPLIT_SEEDS), default="report")
     ap.add_argument("--ledger", action="store_true", help="take the results kept in the ledger too")
+    ap.add_argument("--pixels", type=int, default=1, metavar="S", help="as clothing.py's --pixels")
     return ap
 
 
@@ -148,7 +153,7 @@ def _spec(p: dict, condition: str) -> str:
     from pose_accuracy import bench_spec
 
     return bench_spec(f"clothing_{p['name']}_{condition}", "../body.npz", p["seed"],
-                      f"  skin_tone: {p['skin_tone']}\n{person}")
+                      f"  skin_tone: {p['skin_tone']}\n{person}", pixels=RUN["pixels"])
 
 
 def _check_poses(folder: Path, p: dict) -> str | None:
@@ -489,6 +494,7 @@ def table(args) -> int:
         return 1
     summary = summarise(rows)
     codes = Counter(f"{r.get('code', 'not recorded')} / {r.get('segmentation', 'not recorded')}" for r in rows)
+    print(f"rig: 4 cameras of {656 * RUN['pixels']}x{490 * RUN['pixels']} px (cache {RUN['name']})")
     print("fitting / segmentation code: " + ", ".join(f"{c} ({n} results)" for c, n in codes.most_common())
           + ("  — MIXED: the results are not one code's; `run` redoes the others" if len(codes) > 1 else ""))
     for cond, s in summary.items():
@@ -656,12 +662,17 @@ def main(argv=None) -> int:
     ap.add_argument("--real-skin", action="store_true", help="also the skin classifier on ../shared/data/skin")
     ap.add_argument("--split", choices=sorted(SPLIT_SEEDS), default="report",
                     help="report: seeds 2000+ (the reported figures); dev: seeds 3000+ (choose settings here)")
+    ap.add_argument("--pixels", type=int, default=1, metavar="S",
+                    help="a rig of S times as many pixels each way through the same lenses (1312x980 for 2; the "
+                         "sample rig is the thesis' 656x490): its own cache and ledger folder, <cache>-x<S>")
     args = ap.parse_args(argv)
     if args.quick:
         args.subjects, args.poses = 2, 4
     if args.only and not all(0 <= i < args.subjects for i in args.only):
         ap.error(f"--only: expected subject indices in 0..{args.subjects - 1}, got {args.only}")
-    select_run(args.cache, args.quick, args.split, args.ledger)
+    if args.pixels < 1:
+        ap.error(f"--pixels: expected an integer >= 1, got {args.pixels}")
+    select_run(args.cache, args.quick, args.split, args.ledger, args.pixels)
     if args.pair_frames < 1:
         ap.error(f"--pair-frames: expected an integer >= 1, got {args.pair_frames}")
     return {"build": build, "run": run, "table": table, "coverage": coverage, "pairs": pairs}[args.step](args)

@@ -115,7 +115,7 @@ def main(argv=None) -> int:
                                                           formatter_class=argparse.RawDescriptionHelpFormatter))
     ap.add_argument("--conditions", nargs="+", default=["tight", "loose"], choices=["tight", "loose"])
     args = ap.parse_args(argv)
-    clothing.select_run(args.cache, args.quick, args.split, args.ledger)
+    clothing.select_run(args.cache, args.quick, args.split, args.ledger, args.pixels)
     rows = [r for r in clothing.result_rows() if r["condition"] in args.conditions]
     if not rows:
         print("no results yet: run `clothing.py build` then `clothing.py run`")

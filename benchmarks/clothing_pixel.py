@@ -135,7 +135,7 @@ def main(argv=None) -> int:
     args = ap.parse_args(argv)
     if args.scale < 1:
         ap.error(f"--scale: expected an integer >= 1, got {args.scale}")
-    clothing.select_run(args.cache, args.quick, args.split, args.ledger)
+    clothing.select_run(args.cache, args.quick, args.split, args.ledger, args.pixels)
     names = {p["name"] for p in clothing.subjects(args.subjects, args.poses, args.quick)}
     rows = [r for r in clothing.result_rows() if r["condition"] == "tight" and r["subject"] in names]
     if not rows:

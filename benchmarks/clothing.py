@@ -74,8 +74,9 @@ MEASURES = ("stature", "chest_circumference", "waist_circumference", "hip_circum
 THESIS_GENDER = {"single": 86.0, "vote": 90.6, "batch": 94.3}
 
 
-#: ``full`` or ``quick`` (set by ``--quick``), ``dev-`` in front for the dev split: separate caches;
-#: ``ledger``: also keep the results in the repository (``--ledger``).
+#: ``full`` or ``quick`` (set by ``--quick``), ``dev-`` in front for the dev split, ``-x<S>`` behind for a rig of
+#: S× the pixels (``pixels``, ``--pixels``): separate caches; ``ledger``: also keep the results in the repository
+#: (``--ledger``).
 RUN = {"name": "full", "first_seed": FIRST_SEED, "ledger": False, "pixels": 1}
 #: Results kept in the repository, per cache name: the full run takes longer than a machine of ours
 #: lives (about 3.5 h on 2 cores), so each machine commits the subjects it finished and the next

@@ -88,6 +88,8 @@ def select_run(cache: str | None, quick: bool, split: str, ledger: bool, pixels:
     """Set :data:`RUN` from the command line: the cache's name (``cache``, else ``quick`` or
     ``full``; ``<split>-`` in front off the report split, ``-x<pixels>`` behind on a finer rig),
     the split's first seed, the ledger, the rig's pixels."""
+    if pixels < 1:
+        raise SystemExit(f"--pixels: expected an integer >= 1, got {pixels}")
     RUN["name"] = cache or ("quick" if quick else "full")
     if split != "report":
         RUN["name"] = f"{split}-{RUN['name']}"
@@ -495,7 +497,10 @@ def table(args) -> int:
         return 1
     summary = summarise(rows)
     codes = Counter(f"{r.get('code', 'not recorded')} / {r.get('segmentation', 'not recorded')}" for r in rows)
-    print(f"rig: 4 cameras of {656 * RUN['pixels']}x{490 * RUN['pixels']} px (cache {RUN['name']})")
+    from pose_accuracy import RIG_SIZE
+
+    w, h = (n * RUN["pixels"] for n in RIG_SIZE)
+    print(f"rig: 4 cameras of {w}x{h} px (cache {RUN['name']})")
     print("fitting / segmentation code: " + ", ".join(f"{c} ({n} results)" for c, n in codes.most_common())
           + ("  — MIXED: the results are not one code's; `run` redoes the others" if len(codes) > 1 else ""))
     for cond, s in summary.items():
@@ -671,8 +676,6 @@ def main(argv=None) -> int:
         args.subjects, args.poses = 2, 4
     if args.only and not all(0 <= i < args.subjects for i in args.only):
         ap.error(f"--only: expected subject indices in 0..{args.subjects - 1}, got {args.only}")
-    if args.pixels < 1:
-        ap.error(f"--pixels: expected an integer >= 1, got {args.pixels}")
     select_run(args.cache, args.quick, args.split, args.ledger, args.pixels)
     if args.pair_frames < 1:
         ap.error(f"--pair-frames: expected an integer >= 1, got {args.pair_frames}")

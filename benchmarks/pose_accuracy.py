@@ -215,10 +215,15 @@ def people(n: int, per_person: int, split: str = "held-out") -> list[dict]:
     return out
 
 
+#: The benchmarks' camera size (the thesis' 656×490) and focal length in pixels at ``pixels=1``.
+RIG_SIZE, RIG_FOCAL_PX = (656, 490), 560
+
+
 def bench_spec(name: str, body: str, seed: int, person: str, pixels: int = 1) -> str:
     """A scene spec of one generated person on the benchmarks' 4-camera rig under one point
     light (``person``: the YAML lines of the ``person`` block after ``skin_tone``); ``pixels`` × as many
-    pixels each way through the same lenses (656×490 at 1)."""
+    pixels each way through the same lenses (:data:`RIG_SIZE` at 1)."""
+    w, h = (n * pixels for n in RIG_SIZE)
     return f"""format: studio.sim-spec
 version: 1
 name: {name}
@@ -226,7 +231,7 @@ body: {body}
 fps: 1
 seed: {seed}
 background_frames: 5
-cameras: {{count: 4, size: [{656 * pixels}, {490 * pixels}], radius: 3.6, height: 2.3, focal_px: {560 * pixels}}}
+cameras: {{count: 4, size: [{w}, {h}], radius: 3.6, height: 2.3, focal_px: {RIG_FOCAL_PX * pixels}}}
 lights:
   - {{type: point, position: [1.1, -1.5, 3.6], intensity: 0.85}}
 ambient: 0.45
